@@ -1,0 +1,46 @@
+# nlosplan set-up and main targets. `make demo` and `make test` each install
+# everything they need into .venv first (idempotent; re-runs only when
+# pyproject.toml changes).
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   ?= .venv
+BIN     = $(VENV)/bin
+STAMP   = $(VENV)/.nlosplan-installed
+SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: setup system-deps demo test check bench clean
+
+setup: system-deps $(STAMP)
+
+# Mitsuba's CPU variant needs libLLVM >= 16 (Debian 12 ships 15 by default).
+system-deps:
+	@if ls /usr/lib/*/libLLVM-1[6-9].so /usr/lib/*/libLLVM-2[0-9].so /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* >/dev/null 2>&1; then \
+	  echo "libLLVM >= 16 present"; \
+	else \
+	  echo "installing libllvm19 (Mitsuba CPU variant)"; \
+	  $(SUDO) apt-get update -qq && $(SUDO) apt-get install -y -qq libllvm19; \
+	fi
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	# pinned CPU build of PyTorch first, so nothing pulls the CUDA wheels
+	$(BIN)/python -m pip install -q torch==2.13.0
+	$(BIN)/python -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+# The main job (until the design planner lands): simulate the default scene.
+demo: setup
+	$(BIN)/nlosplan simulate --out nlosplan-out/histogram.npy --plot nlosplan-out/histogram.png
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+check: setup
+	$(BIN)/nlosplan check
+
+bench: setup
+	$(BIN)/nlosplan bench histogram
+
+clean:
+	rm -rf $(VENV) nlosplan-out .pytest_cache .hypothesis

@@ -1,0 +1,3 @@
+from nlosplan.cli import main
+
+raise SystemExit(main())
