@@ -36,10 +36,16 @@ _INV_SQRT_2PI = 0.3989422804014327
 
 
 def _tails(z):
-    """Lower and upper Gaussian tails ``(Phi(z), 1 - Phi(z))``, each accurate."""
-    lower = 0.5 * jax.scipy.special.erfc(-z / _SQRT2)
-    upper = 0.5 * jax.scipy.special.erfc(z / _SQRT2)
-    return lower, upper
+    """Gaussian tails ``(Phi(z), 1 - Phi(z))`` from one ``erfc``.
+
+    The smaller tail is computed directly (accurate to full relative
+    precision); the larger is its complement. :func:`_combine` only ever uses
+    the small tail where it matters, so one ``erfc`` per edge suffices.
+    """
+    negative = z < 0
+    small = 0.5 * jax.scipy.special.erfc(jnp.where(negative, -z, z) / _SQRT2)
+    big = 1.0 - small
+    return jnp.where(negative, small, big), jnp.where(negative, big, small)
 
 
 def _combine(lower_a, upper_a, lower_b, upper_b, right_of, left_of):

@@ -36,8 +36,9 @@ class WallScene:
     distance_m : float
         Distance along the optical axis to the wall, metres (> 0).
     yaw_deg, pitch_deg : float
-        Tilt of the wall normal about the sensor's y and x axes, degrees
-        (|angle| < 89).
+        Tilt of the wall about the sensor's y and x axes, degrees
+        (|angle| < 89); positive yaw puts the right (+x) side farther away,
+        positive pitch the top (+y) side.
     albedo : float
         Lambertian albedo in [0, 1].
     lights_on : bool
