@@ -96,6 +96,7 @@ def bin_impulses(times_ps, weights, edges_ps, sigma_ps):
     upper = jnp.where(positive, upper, 1.0 - step_lower)
     da, db = d[..., :-1], d[..., 1:]
     mass = _combine(lower[..., :-1], upper[..., :-1], lower[..., 1:], upper[..., 1:], da >= 0, db <= 0)
+    mass = jnp.maximum(mass, 0.0)
     return jnp.einsum("...kb,...k->...b", mass, w)
 
 
@@ -183,4 +184,6 @@ def bin_boxes(starts_ps, widths_ps, masses, edges_ps, sigma_ps):
     right_of = (xa - hh) >= 0  # whole box left of the bin's left edge
     left_of = xb <= 0  # whole box right of the bin's right edge
     mass = _combine(lower[..., :-1], upper[..., :-1], lower[..., 1:], upper[..., 1:], right_of, left_of)
+    # far tails (> ~13 sigma) of psi differences can round to -1e-37; mass is never negative
+    mass = jnp.maximum(mass, 0.0)
     return jnp.einsum("...kb,...k->...b", mass, m)

@@ -116,16 +116,28 @@ class SensorConfig:
     notes: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
+        # numpy scalars validate like Python numbers; store them as Python numbers so that
+        # JSON/TOML writers accept them
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.generic):
+                object.__setattr__(self, f.name, value.item())
         if self.pulse_shape is not None:
-            shape = np.asarray(self.pulse_shape, dtype=float).ravel()
+            bad = "pulse_shape must be a non-empty list of finite, non-negative samples"
+            if not isinstance(self.pulse_shape, (list, tuple, np.ndarray)):
+                raise UserError(bad)
+            try:
+                shape = np.asarray(self.pulse_shape, dtype=float).ravel()
+            except (TypeError, ValueError):
+                raise UserError(bad) from None
             if shape.size == 0 or not np.all(np.isfinite(shape)) or np.any(shape < 0):
-                raise UserError(
-                    "pulse_shape must be a non-empty list of finite, non-negative samples"
-                )
+                raise UserError(bad)
             total = float(shape.sum())
             if total <= 0:
                 raise UserError("pulse_shape must have a positive sum")
-            object.__setattr__(self, "pulse_shape", tuple(float(v) for v in shape / total))
+            if abs(total - 1.0) > 1e-12:  # normalise once; re-normalising would drift in the last digit
+                shape = shape / total
+            object.__setattr__(self, "pulse_shape", tuple(float(v) for v in shape))
         validate(self)
 
     # ------------------------------------------------------------------ derived
@@ -198,7 +210,7 @@ class SensorConfig:
                 f"unknown sensor parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(known))}"
             )
         data = dict(data)
-        if data.get("pulse_shape") is not None:
+        if isinstance(data.get("pulse_shape"), list):
             data["pulse_shape"] = tuple(data["pulse_shape"])
         try:
             return cls(**data)
@@ -286,6 +298,7 @@ def _integer(name: str, value: Any, lo: int, hi: int) -> None:
 
 def validate(cfg: SensorConfig) -> None:
     """Check every field of ``cfg``; raise :class:`UserError` naming the first bad one."""
+    _check(isinstance(cfg.name, str) and cfg.name != "", f"name={cfg.name!r} must be a non-empty string")
     _integer("zones_rows", cfg.zones_rows, 1, MAX_ZONES_PER_AXIS)
     _integer("zones_cols", cfg.zones_cols, 1, MAX_ZONES_PER_AXIS)
     _integer("n_bins", cfg.n_bins, 1, MAX_BINS)

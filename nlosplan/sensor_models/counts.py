@@ -18,6 +18,12 @@ from nlosplan.constants import MAX_COUNT_24BIT
 EXACT_POISSON_MAX_MEAN: float = 4.0e6
 
 
+def _exclusive_cumsum(x):
+    """``sum_{i<j} x_i`` along the last axis, without the cancellation of ``cumsum - x``."""
+    pad = jnp.zeros(x.shape[:-1] + (1,), x.dtype)
+    return jnp.concatenate([pad, jnp.cumsum(x, axis=-1)[..., :-1]], axis=-1)
+
+
 def pileup_expected(rate_per_iteration, iterations):
     """Expected counts of a first-photon detector (Coates' model).
 
@@ -41,7 +47,7 @@ def pileup_expected(rate_per_iteration, iterations):
     """
     lam = jnp.asarray(rate_per_iteration)
     lam = jnp.clip(lam, 0.0, None)
-    before = jnp.cumsum(lam, axis=-1) - lam
+    before = _exclusive_cumsum(lam)
     return iterations * (-jnp.expm1(-lam)) * jnp.exp(-before)
 
 
@@ -64,7 +70,7 @@ def coates_correction(counts, iterations):
         finite estimate there.
     """
     c = jnp.asarray(counts)
-    remaining = iterations - (jnp.cumsum(c, axis=-1) - c)
+    remaining = iterations - _exclusive_cumsum(c)
     safe_remaining = jnp.where(remaining > 0, remaining, 1.0)
     frac = jnp.where(remaining > 0, c / safe_remaining, 1.0)
     frac = jnp.clip(frac, 0.0, 1.0)

@@ -57,15 +57,21 @@ def zone_solid_angles(sensor: SensorConfig) -> np.ndarray:
 
 @functools.lru_cache(maxsize=64)
 def _gaussian_flash_norm(fwhm_x_deg: float, fwhm_y_deg: float) -> float:
-    """Integral over the forward hemisphere of the unnormalised Gaussian profile."""
-    n = 1441
-    th = np.linspace(-np.pi / 2, np.pi / 2, n + 1)
-    mid = 0.5 * (th[1:] + th[:-1])
-    tx, ty = np.meshgrid(mid, mid, indexing="xy")
+    """Integral over the forward hemisphere of the unnormalised Gaussian profile.
+
+    Midpoint rule on a grid that spans ``min(90 deg, 12 sigma)`` per axis, so
+    that narrow beams are resolved as well as wide ones.
+    """
+    n = 1201
+    sig = np.radians([fwhm_x_deg, fwhm_y_deg]) / 2.3548200450309493
+    lim = np.minimum(np.pi / 2, 12.0 * sig)
+    thx = np.linspace(-lim[0], lim[0], n + 1)
+    thy = np.linspace(-lim[1], lim[1], n + 1)
+    tx, ty = np.meshgrid(0.5 * (thx[1:] + thx[:-1]), 0.5 * (thy[1:] + thy[:-1]), indexing="xy")
     prof = _gaussian_profile(tx, ty, fwhm_x_deg, fwhm_y_deg)
     u, v = np.tan(tx), np.tan(ty)
-    du = (1 + u * u) * (th[1] - th[0])
-    dv = (1 + v * v) * (th[1] - th[0])
+    du = (1 + u * u) * (thx[1] - thx[0])
+    dv = (1 + v * v) * (thy[1] - thy[0])
     d_omega = du * dv / (1 + u * u + v * v) ** 1.5
     return float(np.sum(prof * d_omega))
 
