@@ -1,0 +1,342 @@
+"""Triangle-mesh input and area-weighted surface sampling.
+
+:func:`load_obj` reads a mesh file into a validated :class:`~nlosplan.simulators.scene.Mesh`
+(``trimesh`` is imported only when a file is read). :func:`sample_surface`
+draws stratified, area-weighted points on a mesh for quadrature of surface
+integrals such as the three-bounce transport over a hidden object.
+
+Notes
+-----
+With ``M`` samples of equal area weight ``A / M`` (``A`` the sampled area),
+a surface integral is estimated as
+
+    integral_S f(x) dA  ~=  sum_k f(p_k) * areas_k
+
+The strata make the per-face sample counts differ from their expectation
+``M a_f / A`` by less than one, so the estimator's variance is far below
+that of independent sampling for smooth ``f``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nlosplan.errors import UserError
+from nlosplan.simulators.scene import Mesh
+
+__all__ = ["SurfaceSamples", "load_obj", "sample_surface", "square_patch"]
+
+
+def load_obj(path: str | os.PathLike, *, name: str | None = None) -> Mesh:
+    """Load a triangle mesh file (Wavefront OBJ or another format trimesh reads).
+
+    Parameters
+    ----------
+    path : str or path-like
+        Mesh file; coordinates are taken as metres.
+    name : str, optional
+        Mesh label; defaults to the file name without its suffix.
+
+    Returns
+    -------
+    Mesh
+        Vertices at the same position merged (texture coordinates and
+        vertex normals are dropped); degenerate (zero-area) faces kept. A
+        watertight mesh with inward-facing winding (negative signed volume)
+        is flipped so that its face normals point outward.
+
+    Raises
+    ------
+    UserError
+        The file is missing or unreadable, is not a mesh, or has no triangles
+        (one line naming the file).
+    """
+    p = Path(path)
+    label = name if name is not None else p.stem
+    if not p.exists():
+        raise UserError(f"mesh file {str(p)!r} does not exist")
+    if not p.is_file():
+        raise UserError(f"mesh file {str(p)!r} is not a file")
+    if p.suffix.lower() == ".obj":
+        try:
+            p.read_bytes().decode("utf-8")
+        except OSError as e:
+            raise UserError(f"mesh file {str(p)!r} cannot be read: {e.strerror or e}") from None
+        except UnicodeDecodeError:
+            raise UserError(f"mesh file {str(p)!r} is not a text OBJ file (not UTF-8)") from None
+
+    import trimesh  # heavy import, only when a file is read
+
+    try:
+        tm = trimesh.load(str(p), force="mesh", process=True)
+    except Exception as e:  # trimesh raises many types for bad files
+        msg = " ".join(str(e).split()) or type(e).__name__
+        raise UserError(f"mesh file {str(p)!r} cannot be read as a mesh: {msg}") from None
+    if not isinstance(tm, trimesh.Trimesh):
+        raise UserError(f"mesh file {str(p)!r} does not hold a triangle mesh")
+    if len(tm.faces) == 0:
+        raise UserError(f"mesh file {str(p)!r} has no triangles")
+    # only positions are kept, so also merge vertices that differ only in texture or normal
+    tm.merge_vertices(merge_tex=True, merge_norm=True)
+    vertices = np.asarray(tm.vertices, dtype=np.float64)
+    faces = np.asarray(tm.faces, dtype=np.int64)
+    if tm.is_watertight and float(tm.volume) < 0:
+        faces = faces[:, ::-1].copy()
+    return Mesh(vertices=vertices, faces=faces, name=label)
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceSamples:
+    """Points on a mesh surface with their quadrature weights.
+
+    Parameters
+    ----------
+    points : ndarray of float64, shape (M, 3)
+        Sample positions in the mesh frame, metres.
+    normals : ndarray of float64, shape (M, 3)
+        Unit outward normal of the face each sample lies on.
+    areas : ndarray of float64, shape (M,)
+        Area represented by each sample, m^2; they sum to the sampled area.
+    face_index : ndarray of int64, shape (M,)
+        Index of the face each sample lies on.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    areas: np.ndarray
+    face_index: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.areas.shape[0])
+
+
+def _empty() -> SurfaceSamples:
+    return SurfaceSamples(
+        points=np.zeros((0, 3)), normals=np.zeros((0, 3)), areas=np.zeros(0),
+        face_index=np.zeros(0, dtype=np.int64),
+    )
+
+
+def sample_surface(mesh: Mesh, n: int, *, seed: int = 0, face_mask: np.ndarray | None = None) -> SurfaceSamples:
+    """Stratified, area-weighted samples on a mesh surface.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The surface, in its own frame (metres).
+    n : int
+        Number of samples (>= 0).
+    seed : int
+        Seed of :func:`numpy.random.default_rng`; the result is a pure
+        function of ``(mesh, n, seed, face_mask)``.
+    face_mask : array_like of bool, shape (F,), optional
+        Sample only the faces where this is true.
+
+    Returns
+    -------
+    SurfaceSamples
+        ``n`` samples, each with area ``A / n`` (``A`` the total area of
+        the selected faces); empty when ``n == 0`` or ``A == 0``.
+
+    Raises
+    ------
+    UserError
+        ``mesh`` not a :class:`Mesh`, ``n`` negative or not an integer, or
+        ``face_mask`` not boolean of shape (F,).
+
+    Notes
+    -----
+    Stratum ``k`` draws ``u_k = (k + xi_k) / n`` and picks the face whose
+    interval of the cumulative area contains ``u_k A`` (zero-area faces have
+    empty intervals and are never picked). The position inside that
+    interval, rescaled to [0, 1), is the first uniform number ``r1``; with a
+    second independent uniform ``r2`` the point is
+
+        p = (1 - sqrt(r1)) a + sqrt(r1) (1 - r2) b + sqrt(r1) r2 c
+
+    for the face's vertices ``a, b, c``, which is uniform on the triangle.
+    """
+    if not isinstance(mesh, Mesh):
+        raise UserError(f"sample_surface needs a Mesh, got {type(mesh).__name__}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise UserError(f"number of surface samples n={n!r} must be an integer >= 0")
+    n = int(n)
+    if n < 0:
+        raise UserError(f"number of surface samples n={n} must be >= 0")
+    face_areas = mesh.face_areas
+    if face_mask is not None:
+        mask = np.asarray(face_mask)
+        if mask.shape != face_areas.shape or mask.dtype != np.bool_:
+            raise UserError(
+                f"face_mask must be a boolean array of shape ({face_areas.shape[0]},), got "
+                f"{mask.dtype} of shape {mask.shape}"
+            )
+        face_areas = np.where(mask, face_areas, 0.0)
+    cum = np.cumsum(face_areas)
+    total = float(cum[-1])
+    if n == 0 or total <= 0:
+        return _empty()
+
+    rng = np.random.default_rng(seed)
+    xi = rng.random(n)
+    r2 = rng.random(n)
+    target = (np.arange(n) + xi) / n * total
+    idx = np.searchsorted(cum, target, side="right")
+    last = int(np.flatnonzero(face_areas > 0)[-1])
+    idx = np.minimum(idx, last)  # guards u*A rounding up to A
+    a_sel = face_areas[idx]
+    start = cum[idx] - a_sel
+    r1 = np.clip((target - start) / a_sel, 0.0, 1.0)
+
+    tri = mesh.triangles[idx]
+    s = np.sqrt(r1)[:, None]
+    r2 = r2[:, None]
+    points = (1.0 - s) * tri[:, 0] + s * (1.0 - r2) * tri[:, 1] + s * r2 * tri[:, 2]
+    return SurfaceSamples(
+        points=points,
+        normals=mesh.face_normals[idx],
+        areas=np.full(n, total / n),
+        face_index=idx.astype(np.int64),
+    )
+
+
+def square_patch(size: float, name: str = "patch") -> Mesh:
+    """A flat square of two triangles in the z = 0 plane, centred at the origin.
+
+    Parameters
+    ----------
+    size : float
+        Side length, metres (> 0).
+    name : str
+        Mesh label.
+
+    Returns
+    -------
+    Mesh
+        Four vertices, two faces, normal +z (counter-clockwise seen from +z).
+    """
+    if isinstance(size, bool) or not isinstance(size, (int, float, np.integer, np.floating)) or not (
+        np.isfinite(size) and size > 0
+    ):
+        raise UserError(f"patch size={size!r} must be a finite length > 0 (metres)")
+    h = float(size) / 2.0
+    vertices = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+    return Mesh(vertices=vertices, faces=faces, name=name)
+
+
+def _morton_order(points: np.ndarray) -> np.ndarray:
+    """Indices ordering 3-D points along a Morton (Z-order) curve: neighbours in order are near in space."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    q = ((points - lo) / np.maximum(hi - lo, 1e-12) * 1023).astype(np.uint64)
+    code = np.zeros(len(points), dtype=np.uint64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
+def _normal_bins(normals: np.ndarray, step_deg: float = 20.0) -> np.ndarray:
+    """Integer label per unit normal: directions within about ``step_deg`` share a label."""
+    theta = np.degrees(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)))
+    phi = np.degrees(np.arctan2(normals[:, 1], normals[:, 0])) % 360.0
+    ring = np.floor(theta / step_deg).astype(np.int64)
+    per_ring = np.maximum(1, np.round(360.0 * np.sin(np.radians((ring + 0.5) * step_deg)) / step_deg)).astype(np.int64)
+    sector = np.floor(phi / 360.0 * per_ring).astype(np.int64) % per_ring
+    return ring * 1000 + sector
+
+
+def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = None, seed: int = 0,
+                       oversample: int = 16, iterations: int = 6) -> SurfaceSamples:
+    """About ``n`` spatially compact, area-weighted quadrature points on a mesh surface.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    n : int
+        Number of points (>= 0); exactly ``n`` unless a normal group needs one more.
+    face_mask : array_like of bool, shape (F,), optional
+        Only these faces.
+    seed : int
+        Seed of the oversampling.
+    oversample : int
+        Random samples drawn per quadrature point.
+    iterations : int
+        Lloyd iterations refining the clusters.
+
+    Returns
+    -------
+    SurfaceSamples
+        Points whose areas sum exactly to the selected area
+        (``face_index`` is the face of the sample nearest to each centroid).
+
+    Notes
+    -----
+    ``oversample * n`` stratified samples (:func:`sample_surface`) are grouped
+    by normal direction (about 20 degree bins, so a point never averages the
+    front and the side of an object); each group gets points in proportion
+    to its area, starts as runs of equal area along a Morton curve, and is
+    made compact by Lloyd (k-means) iterations. A point is the sample nearest
+    its cluster's centroid (so it lies on the surface, also for clusters
+    that straddle a hole), with the cluster's mean normal and total area.
+    Clusters are compact, so this is a midpoint rule on cells of size
+    ``h ~ (A / n)^(1/2)`` whatever the triangulation (sliver faces of a
+    fan-triangulated disc included): error ``O(h^2)``, against ``O(n^-1/2)``
+    for the raw random samples.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or int(n) < 0:
+        raise UserError(f"number of quadrature points n={n!r} must be an integer >= 0")
+    n = int(n)
+    raw = sample_surface(mesh, n * int(oversample), seed=seed, face_mask=face_mask)
+    if n == 0 or len(raw) == 0:
+        return _empty()
+    labels = _normal_bins(raw.normals)
+    groups = [np.flatnonzero(labels == g) for g in np.unique(labels)]
+    share = np.array([len(g) for g in groups], float) / len(raw) * n
+    counts = np.maximum(1, np.floor(share)).astype(np.int64)
+    for i in np.argsort(-(share - np.floor(share))):  # largest remainders get the leftover points
+        if counts.sum() >= n:
+            break
+        counts[i] += 1
+    pts, nrm, wts, idx = [], [], [], []
+    for g, c in zip(groups, counts):
+        members = _lloyd(raw.points[g], int(min(c, len(g))), iterations)
+        for run in members:
+            run = g[run]
+            p = raw.points[run].mean(axis=0)
+            nearest = run[np.argmin(np.linalg.norm(raw.points[run] - p, axis=1))]  # stay on the surface
+            nr = raw.normals[run].sum(axis=0)
+            pts.append(raw.points[nearest])
+            nrm.append(nr / np.linalg.norm(nr))
+            wts.append(raw.areas[run].sum())
+            idx.append(raw.face_index[nearest])
+    return SurfaceSamples(points=np.array(pts), normals=np.array(nrm), areas=np.array(wts),
+                          face_index=np.array(idx, dtype=np.int64))
+
+
+def _lloyd(points: np.ndarray, k: int, iterations: int) -> list[np.ndarray]:
+    """Split points into ``k`` compact clusters: Morton-curve runs refined by Lloyd iterations.
+
+    Returns the member indices of each non-empty cluster.
+    """
+    from scipy.spatial import cKDTree
+
+    order = _morton_order(points)
+    runs = np.array_split(order, k)
+    label = np.empty(len(points), np.int64)
+    for i, r in enumerate(runs):
+        label[r] = i
+    for _ in range(iterations):
+        count = np.bincount(label, minlength=k)
+        live = count > 0
+        centers = np.stack([np.bincount(label, points[:, a], minlength=k) for a in range(3)], axis=1)
+        centers = centers[live] / count[live, None]
+        label = cKDTree(centers).query(points)[1]
+        k = len(centers)
+    order = np.argsort(label, kind="stable")
+    bounds = np.flatnonzero(np.diff(label[order])) + 1
+    return [m for m in np.split(order, bounds) if len(m)]
