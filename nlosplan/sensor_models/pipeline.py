@@ -125,6 +125,31 @@ def expected_counts(
         zero = jnp.zeros(lam.shape[:-1] + (1,), dtype)
         xt = jnp.full(lam.shape[:-1] + (1,), crosstalk, dtype)
         lam = lam + bin_arrivals(zero, xt, edges_ps, sigma_ps, pulse)
+    return counts_from_rates(lam, iterations=iterations, background_per_bin=background_per_bin,
+                             pileup=pileup, max_count=max_count)
+
+
+def counts_from_rates(lam, *, iterations, background_per_bin=0.0, pileup: bool = False, max_count=None):
+    """Expected recorded counts from binned photons per iteration.
+
+    Parameters
+    ----------
+    lam : array, shape (..., B)
+        Signal photons per iteration per bin (already through the impulse response).
+    iterations : scalar
+        Laser iterations per histogram.
+    background_per_bin : scalar or array broadcastable to (..., B)
+        Ambient + dark photons per iteration per bin.
+    pileup : bool
+        Apply Coates pile-up (static).
+    max_count : int or None
+        Clip expected counts here (24-bit saturation); None to skip.
+
+    Returns
+    -------
+    array, shape (..., B)
+    """
+    dtype = lam.dtype
     if not (isinstance(background_per_bin, (int, float)) and background_per_bin == 0):
         lam = lam + jnp.asarray(background_per_bin, dtype)
     counts = pileup_expected(lam, iterations) if pileup else iterations * lam
