@@ -1,0 +1,79 @@
+"""Fidelity knobs of the fast simulator and their named levels."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from nlosplan.errors import UserError
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """Quadrature and sampling sizes (every result converges as they grow).
+
+    Parameters
+    ----------
+    zone_sub : int
+        Sub-rays per zone axis: first-bounce returns and the detection cells
+        (``x2``) of Lambertian three-bounce paths.
+    flash_sub : int
+        Flash cells per zone axis inside the field of view (``x1``).
+    flash_outer : int
+        Flash cells per side per axis outside the field of view, out to 3.5
+        sigma of a Gaussian flash (Lambertian objects, or lobes reaching in).
+    object_samples : int
+        Stratified, area-weighted surface samples per hidden object.
+    time_oversample : int
+        Time-grid nodes per sensor bin.
+    seed : int
+        Seed of the surface sampling.
+    """
+
+    zone_sub: int = 4
+    flash_sub: int = 4
+    flash_outer: int = 4
+    object_samples: int = 384
+    time_oversample: int = 4
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            lo = 0 if f.name in ("flash_outer", "seed") else 1
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise UserError(f"fidelity {f.name}={v!r} must be an integer >= {lo}")
+        if self.object_samples > 1_000_000 or self.zone_sub > 64 or self.flash_sub > 64:
+            raise UserError("fidelity too large: object_samples <= 1e6, zone_sub and flash_sub <= 64")
+
+    def to_dict(self) -> dict[str, int]:
+        """Plain dictionary of the knobs."""
+        return dataclasses.asdict(self)
+
+
+#: Named levels, cheapest first. "reference" is the converged reference of ``nlosplan bench simulate``.
+FIDELITY_LEVELS: dict[str, Fidelity] = {
+    "draft": Fidelity(zone_sub=2, flash_sub=2, flash_outer=2, object_samples=64, time_oversample=2),
+    "low": Fidelity(zone_sub=3, flash_sub=3, flash_outer=3, object_samples=128, time_oversample=4),
+    "default": Fidelity(),
+    "high": Fidelity(zone_sub=6, flash_sub=8, flash_outer=6, object_samples=1536, time_oversample=4),
+    "reference": Fidelity(zone_sub=8, flash_sub=24, flash_outer=12, object_samples=16384, time_oversample=8),
+}
+
+
+def resolve_fidelity(value: Any) -> Fidelity:
+    """A :class:`Fidelity` from a level name, a mapping of knobs, or a Fidelity."""
+    if isinstance(value, Fidelity):
+        return value
+    if isinstance(value, str):
+        if value not in FIDELITY_LEVELS:
+            raise UserError(f"unknown fidelity {value!r}; allowed: {', '.join(FIDELITY_LEVELS)}")
+        return FIDELITY_LEVELS[value]
+    if isinstance(value, dict):
+        known = {f.name for f in dataclasses.fields(Fidelity)}
+        bad = sorted(set(value) - known)
+        if bad:
+            raise UserError(f"unknown fidelity knob(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
+        return Fidelity(**value)
+    raise UserError(f"fidelity must be a level name ({', '.join(FIDELITY_LEVELS)}) or a Fidelity, not {value!r}")

@@ -1,0 +1,321 @@
+"""The plan of terms: what the fast simulator computes for a scene, and why.
+
+:func:`build_plan` looks at the scene(s) and sensor(s) once, in NumPy, and
+decides which terms to compute: first-bounce returns of each plane, each
+object's three-bounce term (which zones, wall cells and surface samples),
+ambient and dark counts, crosstalk, which parts of the impulse response. The
+rest is left out with a reason (``explain``). The JAX transport then runs
+only what the plan holds.
+
+A plan serves a *batch* of scenes that share the rig (LiDAR, wall, planes,
+object meshes and reflectance types) and differ in object poses, albedos
+and lights; and a batch of sensors that share the static fields (zones,
+bins, field of view, flash, pulse shape, pile-up, saturation) and differ in
+the dynamic ones (bin width, offset, pulse and jitter widths, photon scale,
+iterations, ambient, dark, crosstalk).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlosplan.constants import C_M_PER_PS
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.pipeline import pulse_boxes
+from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps
+from nlosplan.simulators.fast.fidelity import Fidelity, resolve_fidelity
+from nlosplan.simulators.fast.geometry import direct_returns, trace
+from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, plan_object
+from nlosplan.simulators.scene import Scene
+
+#: Sensor fields a batch may vary (traced); every other field must be equal.
+DYNAMIC_SENSOR_FIELDS = (
+    "bin_width_ps", "start_offset_ps", "pulse_fwhm_ps", "jitter_fwhm_ps", "photon_scale",
+    "iterations", "ambient_rate_hz", "dark_rate_hz", "crosstalk",
+)
+
+
+@dataclass(frozen=True)
+class PlanStatic:
+    """Hashable structure of a plan: the key under which JAX caches compiled code."""
+
+    grid: TimeGrid
+    n_zones: int
+    direct: bool
+    crosstalk: bool
+    irf: str
+    pulse: tuple | None
+    extent: tuple[float, float]
+    nominal_bin_width: float
+    pileup: bool
+    saturation: bool
+    ambient: bool
+    dark: bool
+    objects: tuple[ObjectStatic, ...]
+    object_rows: tuple[tuple[int, ...], ...]
+
+
+@dataclass(frozen=True)
+class Term:
+    """One line of :func:`explain`: a term, whether it is computed, and why."""
+
+    computed: bool
+    name: str
+    reason: str
+
+
+@dataclass(frozen=True, eq=False)
+class SimPlan:
+    """Static decisions and arrays for a batch of scenes and sensors.
+
+    Attributes
+    ----------
+    static : PlanStatic
+    arrays : dict
+        NumPy arrays the transport needs (``direct_*`` and one dict per object).
+    zones : ndarray of int
+        Flat indices (``row * cols + col``) of the output zones.
+    full_grid : bool
+        All zones are output (results reshape to ``(rows, cols, bins)``).
+    terms : tuple of Term
+    warnings : tuple of str
+    sensor : SensorConfig
+        The first sensor (static fields).
+    fidelity : Fidelity
+    paths : int
+        Path evaluations per scene.
+    object_index : tuple of int
+        Index into ``scene.objects`` of each computed object term.
+    """
+
+    static: PlanStatic
+    arrays: dict
+    zones: np.ndarray
+    full_grid: bool
+    terms: tuple
+    warnings: tuple
+    sensor: SensorConfig
+    fidelity: Fidelity
+    paths: int
+    object_index: tuple = ()
+
+    def explain(self) -> str:
+        """Text table of computed and left-out terms with the reason for each."""
+        lines = [f"plan for {self.sensor.name} ({self.sensor.zones_rows}x{self.sensor.zones_cols} zones, "
+                 f"{self.sensor.n_bins} bins), fidelity {self.fidelity.to_dict()}: {self.paths:,} paths per scene"]
+        width = max(len(t.name) for t in self.terms)
+        for t in self.terms:
+            lines.append(f"  {'computed' if t.computed else 'left out':<9} {t.name:<{width}}  {t.reason}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly summary: terms, warnings, zones, paths, fidelity."""
+        return {
+            "computed": [dataclasses.asdict(t) for t in self.terms if t.computed],
+            "left_out": [dataclasses.asdict(t) for t in self.terms if not t.computed],
+            "warnings": list(self.warnings),
+            "zones": self.zones.tolist(),
+            "paths_per_scene": self.paths,
+            "fidelity": self.fidelity.to_dict(),
+            "time_grid": dataclasses.asdict(self.static.grid),
+        }
+
+
+def _resolve_zones(sensor: SensorConfig, zones) -> tuple[np.ndarray, bool]:
+    if zones is None:
+        return np.arange(sensor.n_zones), True
+    out = []
+    for z in zones:
+        try:
+            r, c = (int(v) for v in z)
+        except (TypeError, ValueError):
+            raise UserError(f"zone {z!r} must be a (row, col) pair") from None
+        if not (0 <= r < sensor.zones_rows and 0 <= c < sensor.zones_cols):
+            raise UserError(f"zone ({r},{c}) is outside the {sensor.zones_rows}x{sensor.zones_cols} grid")
+        out.append(r * sensor.zones_cols + c)
+    if not out:
+        raise UserError("no zones requested; give at least one (row, col)")
+    if len(set(out)) != len(out):
+        raise UserError("a zone is requested twice")
+    return np.array(out), False
+
+
+def _check_batch(scenes: list[Scene]) -> None:
+    base = scenes[0]
+    for s in scenes[1:]:
+        same = (
+            np.allclose(s.lidar.basis, base.lidar.basis) and np.allclose(s.lidar.position, base.lidar.position)
+            and _same_rect(s.wall, base.wall) and len(s.planes) == len(base.planes)
+            and all(_same_rect(a, b) for a, b in zip(s.planes, base.planes))
+            and len(s.objects) == len(base.objects)
+            and all(a.mesh is b.mesh and a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg
+                    for a, b in zip(s.objects, base.objects))
+        )
+        if not same:
+            raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes) and the object meshes and "
+                            "reflectance; only object poses, albedos and lights may differ")
+
+
+def _same_rect(a, b) -> bool:
+    return (np.allclose(a.center, b.center) and np.allclose(a.u_axis, b.u_axis) and np.allclose(a.v_axis, b.v_axis)
+            and a.half_u == b.half_u and a.half_v == b.half_v and a.albedo == b.albedo)
+
+
+def _check_sensors(sensors: list[SensorConfig]) -> None:
+    base = sensors[0].to_dict()
+    for s in sensors[1:]:
+        d = s.to_dict()
+        bad = [k for k in base if k not in DYNAMIC_SENSOR_FIELDS + ("name", "notes") and d[k] != base[k]]
+        if bad:
+            raise UserError(f"sensors in one batch may differ only in {', '.join(DYNAMIC_SENSOR_FIELDS)}; "
+                            f"these differ: {', '.join(bad)}")
+
+
+def _direct_view_zones(scene: Scene, sensor: SensorConfig, points: np.ndarray) -> list[int]:
+    """Zones in whose cone some of ``points`` (world, (N, 3)) are nearer than the wall."""
+    p = scene.lidar.points_to_sensor(points)
+    z = p[:, 2]
+    front = z > 1e-9
+    zs = np.where(front, z, 1.0)
+    u, v = p[:, 0] / zs, p[:, 1] / zs
+    tu, tv = math.tan(math.radians(sensor.fov_x_deg) / 2), math.tan(math.radians(sensor.fov_y_deg) / 2)
+    inside = front & (np.abs(u) <= tu) & (np.abs(v) <= tv)
+    if not np.any(inside):
+        return []
+    pts = points[inside]
+    rng = np.linalg.norm(pts - scene.lidar.position, axis=1)
+    hits = trace(scene.lidar.position, (pts - scene.lidar.position) / rng[:, None], (scene.wall, *scene.planes))
+    seen = (hits.plane < 0) | (rng < hits.r)
+    if not np.any(seen):
+        return []
+    col = np.clip(((u[inside][seen] + tu) / (2 * tu) * sensor.zones_cols).astype(int), 0, sensor.zones_cols - 1)
+    row = np.clip(((tv - v[inside][seen]) / (2 * tv) * sensor.zones_rows).astype(int), 0, sensor.zones_rows - 1)
+    return sorted(set((row * sensor.zones_cols + col).tolist()))
+
+
+def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool) -> tuple[str, Term]:
+    pulse = sensor.pulse_shape is not None
+    if not prune or sigma_max > 0:
+        what = ("measured pulse (*) " if pulse else "") + f"Gaussian (largest sigma {sigma_max:.1f} ps)"
+        return "full", Term(True, "impulse response", what + ", closed form per grid node")
+    if pulse:
+        return "pulse", Term(False, "impulse response: Gaussian", "jitter 0 and no Gaussian pulse width: only the "
+                             "measured pulse shape is convolved (exact box overlaps, no erf)")
+    return "none", Term(False, "impulse response", "jitter 0, no pulse: ideal impulse response, no convolution")
+
+
+def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool = True) -> SimPlan:
+    """Plan the fast simulation of a batch of scenes and sensors.
+
+    Parameters
+    ----------
+    scenes : Scene or list of Scene
+        Scenes sharing the rig; object poses, albedos and lights may differ.
+    sensors : SensorConfig or list of SensorConfig
+        Sensors sharing the static fields (see :data:`DYNAMIC_SENSOR_FIELDS`).
+    fidelity : str, dict or Fidelity
+    zones : list of (row, col), optional
+        Only these zones (default all).
+    prune : bool
+        Leave out terms, zones, cells and samples that cannot contribute.
+
+    Returns
+    -------
+    SimPlan
+    """
+    scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
+    sensors = [sensors] if isinstance(sensors, SensorConfig) else list(sensors)
+    if not scenes or not sensors:
+        raise UserError("need at least one scene and one sensor")
+    _check_batch(scenes)
+    _check_sensors(sensors)
+    fid = resolve_fidelity(fidelity)
+    base, sensor = scenes[0], sensors[0]
+    zones_out, full_grid = _resolve_zones(sensor, zones)
+    terms: list[Term] = []
+    if not full_grid:
+        terms.append(Term(False, "zones", f"only {len(zones_out)} of {sensor.n_zones} zones requested"))
+    rects = (base.wall, *base.planes)
+    path, w, plane = direct_returns(base.lidar, rects, sensor, fid.zone_sub)
+    path, w, plane = path[zones_out], w[zones_out], plane[zones_out]
+    for i, rect in enumerate(rects):
+        n_hit = int((plane == i).sum())
+        reason = (f"{n_hit} of {plane.size} zone sub-rays see it first" if n_hit else
+                  "no zone sub-ray reaches it before another surface (or it is outside the field of view)")
+        terms.append(Term(n_hit > 0, f"first bounce: {rect.name}", reason))
+    direct = bool(np.any(w > 0))
+
+    sigmas = [s.sigma_ps for s in sensors]
+    sigma_max = max(sigmas)
+    reach = (min(s.start_offset_ps - irf_extent_ps(s)[1] for s in sensors),
+             max(s.start_offset_ps + s.window_ps - irf_extent_ps(s)[0] for s in sensors))
+    # latest possible arrival: direct paths and the farthest object path via the wall's corners
+    t_hi = float(path.max()) / C_M_PER_PS if direct else 0.0
+    r_wall = float(np.linalg.norm(base.wall.corners() - base.lidar.position, axis=1).max())
+    for sc in scenes:
+        for obj in sc.objects:
+            v = obj.world_vertices()
+            d = np.linalg.norm(base.wall.corners()[:, None] - v[None], axis=-1).max()
+            t_hi = max(t_hi, 2 * (r_wall + float(d)) / C_M_PER_PS)
+    grids = [TimeGrid.for_sensor(s, 0.0, t_hi, oversample=fid.time_oversample, sigma_ps=sigma_max) for s in sensors]
+    first = min(g.first_bin for g in grids)
+    last = max(g.first_bin + g.n_grid_bins for g in grids)
+    grid = TimeGrid(fid.time_oversample, first, last - first, sensor.n_bins)
+
+    obj_plans: list[ObjectPlan] = []
+    obj_index: list[int] = []
+    warnings: list[str] = []
+    for k, obj in enumerate(base.objects):
+        plan, notes = plan_object(k, [sc.objects[k] for sc in scenes], base, sensor, fid, zones_out, grid, reach, prune)
+        terms.extend(Term(*n) for n in notes)
+        if plan is not None:
+            obj_plans.append(plan)
+            obj_index.append(k)
+        pts = np.concatenate([o.world_vertices() for o in (sc.objects[k] for sc in scenes)])
+        seen = _direct_view_zones(base, sensor, pts)
+        if seen:
+            names = ", ".join(f"({z // sensor.zones_cols},{z % sensor.zones_cols})" for z in seen[:6])
+            warnings.append(f"object {obj.name!r} is inside the LiDAR's direct field of view (zones {names}): this is "
+                            "not an NLOS capture; only its three-bounce light is simulated")
+    if not base.objects:
+        terms.append(Term(False, "hidden object", "none in the scene (background, like DENALI's NOOBJECT capture)"))
+
+    irf, irf_term = _irf_term(sensor, sigma_max, prune)
+    terms.append(irf_term)
+    lights = any(sc.lights_on for sc in scenes)
+    ambient = (lights and any(s.ambient_rate_hz > 0 for s in sensors)) or not prune
+    terms.append(Term(ambient, "ambient light",
+                      "lights on: ambient photons in every bin" if lights and ambient else
+                      ("lights off" if not lights else "the sensor's ambient rate is 0")))
+    dark = any(s.dark_rate_hz > 0 for s in sensors) or not prune
+    terms.append(Term(dark, "dark counts", "dark-count rate > 0" if dark else "dark-count rate is 0"))
+    crosstalk = any(s.crosstalk > 0 for s in sensors) or not prune
+    terms.append(Term(crosstalk, "crosstalk", "cover-glass return at zero path" if crosstalk else "crosstalk is 0"))
+    terms.append(Term(sensor.pileup, "pile-up", "Coates model" if sensor.pileup else "off in this sensor"))
+    terms.append(Term(sensor.saturation, "saturation", "24-bit clip" if sensor.saturation else "off in this sensor"))
+
+    p = pulse_boxes(sensor)
+    pulse = None if p is None else (tuple(p[0].tolist()), float(p[1]), tuple(p[2].tolist()))
+    lo, hi = irf_extent_ps(sensor, sigma_max)
+    static = PlanStatic(
+        grid=grid, n_zones=len(zones_out), direct=direct, crosstalk=crosstalk, irf=irf, pulse=pulse, extent=(lo, hi),
+        nominal_bin_width=float(sensor.bin_width_ps), pileup=sensor.pileup, saturation=sensor.saturation,
+        ambient=ambient, dark=dark, objects=tuple(o.static for o in obj_plans),
+        object_rows=tuple(tuple(int(r) for r in o.zone_rows) for o in obj_plans),
+    )
+    s = path.shape[1]
+    arrays = {
+        "direct_path": path.ravel(), "direct_w": w.ravel(), "direct_row": np.repeat(np.arange(len(zones_out)), s),
+        "objects": [o.arrays for o in obj_plans],
+    }
+    paths = int(np.sum(w > 0)) + sum(o.paths for o in obj_plans)
+    return SimPlan(static=static, arrays=arrays, zones=zones_out, full_grid=full_grid, terms=tuple(terms),
+                   warnings=tuple(warnings), sensor=sensor, fidelity=fid, paths=paths, object_index=tuple(obj_index))
+

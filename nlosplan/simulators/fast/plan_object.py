@@ -1,0 +1,364 @@
+"""Plan of one hidden object's three-bounce term (static, NumPy).
+
+Decides which surface samples, wall cells and zones the object's term needs
+for a batch of poses, sizes its time axes, and says what it left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlosplan.constants import C_M_PER_PS, FWHM_PER_SIGMA
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.simulators.fast.fidelity import Fidelity
+from nlosplan.simulators.fast.geometry import WallCells, flash_extent_tan, tangent_cells, wall_cells
+from nlosplan.simulators.meshes import surface_quadrature
+from nlosplan.simulators.scene import HiddenObject, Scene
+from nlosplan.sensor_models.transient import TimeGrid
+from nlosplan.sensor_models.zones import zone_edges_tan
+
+#: Node axes are rounded up to a multiple of this, so nearby scenes share compiled code.
+BUCKET = 32
+#: Surface points are padded (with zero area) to a multiple of this, for shared compiled code.
+SAMPLE_BUCKET = 64
+#: Object points closer to a wall cell than this many cell sizes use the exact polygon coupling
+#: (the midpoint rule overestimates by about (size / distance)^2 / 3: 0.5 % at 8 cell sizes).
+NEAR_CELLS = 8.0
+#: Lobe tails are followed this many sigmas across zone boundaries.
+LOBE_SIGMAS = 6.0
+
+
+def bucket(n: int) -> int:
+    """``n`` rounded up to a multiple of :data:`BUCKET` (at least one bucket)."""
+    return max(BUCKET, -(-int(n) // BUCKET) * BUCKET)
+
+
+@dataclass(frozen=True)
+class ObjectStatic:
+    """Hashable shape information of an object term (the jit cache key)."""
+
+    kind: str
+    near1: int
+    near2: int
+    lobe: bool
+    n_rows: int
+    n1: int = 0
+    n2: int = 0
+    fft_len: int = 0
+    n_r: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectPlan:
+    """Static arrays and decisions for one hidden object.
+
+    Attributes
+    ----------
+    static : ObjectStatic
+    arrays : dict of ndarray
+        Surface samples (object frame), wall cells and node offsets (see
+        :mod:`nlosplan.simulators.fast.transport`).
+    zone_rows : ndarray of int
+        Rows of the simulator's output zones that receive this term.
+    paths : int
+        Path evaluations per scene.
+    """
+
+    static: ObjectStatic
+    arrays: dict
+    zone_rows: np.ndarray
+    paths: int
+
+
+def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
+    """Faces that can see some part of the wall, and lie in front of it, in any pose."""
+    mesh = obj_list[0].mesh
+    tri, fn, fa = mesh.triangles, mesh.face_normals, mesh.face_areas
+    corners = scene.wall.corners()
+    vis = np.zeros(len(fa), bool)
+    seen = set()
+    for obj in obj_list:
+        key = obj.to_world.tobytes()
+        if key in seen:
+            continue
+        seen.add(key)
+        r, t = obj.to_world[:3, :3], obj.to_world[:3, 3]
+        tw = tri @ r.T + t
+        nw = fn @ r.T
+        cen = tw.mean(axis=1)
+        sees = np.einsum("fk,fck->fc", nw, corners[None] - cen[:, None]).max(axis=1) > 0
+        front = np.max(scene.wall.signed_distance(tw), axis=1) > 0
+        vis |= sees & front
+    return vis & (fa > 0)
+
+
+def _bounding_spheres(obj_list: list[HiddenObject]) -> tuple[np.ndarray, np.ndarray]:
+    """Centre (P, 3) and radius (P,) of every pose's vertices."""
+    cs, rs = [], []
+    for obj in obj_list:
+        v = obj.world_vertices()
+        c = 0.5 * (v.min(0) + v.max(0))
+        cs.append(c)
+        rs.append(float(np.linalg.norm(v - c, axis=1).max()))
+    return np.array(cs), np.array(rs)
+
+
+def _leg_bounds(cells: WallCells, centers: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell, the min and max of ``r + |x_cell - x|`` over all poses' spheres (metres)."""
+    d = np.linalg.norm(cells.centers[:, None, :] - centers[None], axis=-1)  # (N, P)
+    lo = cells.r[:, None] + np.maximum(d - radii[None], 0.0)
+    hi = cells.r[:, None] + d + radii[None]
+    return lo.min(axis=1), hi.max(axis=1)
+
+
+def _tangent_jacobian(scene: Scene, cells: WallCells) -> np.ndarray:
+    """d(u, v)/d(world position) at each cell centre, shape (N, 2, 3)."""
+    lid = scene.lidar
+    p = cells.centers - lid.position
+    z = p @ lid.forward
+    u = (p @ lid.right) / z
+    v = (p @ lid.up) / z
+    ju = (lid.right[None] - u[:, None] * lid.forward[None]) / z[:, None]
+    jv = (lid.up[None] - v[:, None] * lid.forward[None]) / z[:, None]
+    return np.stack([ju, jv], axis=1)
+
+
+def _lobe_spread(scene: Scene, cells: WallCells, jac: np.ndarray, centers: np.ndarray, radii: np.ndarray, sigma: float) -> np.ndarray:
+    """Largest tangent-plane spread of the retro lobe landing at each cell (N,)."""
+    n_w = scene.wall.normal
+    out = np.zeros(len(cells))
+    for c, rad in zip(centers, radii):
+        e = cells.centers - c
+        dist = np.linalg.norm(e, axis=1)
+        e = e / dist[:, None]
+        en = np.minimum(e @ n_w, -1e-3)
+        jp = jac - (jac @ e[:, :, None]) / en[:, None, None] * n_w[None, None, :]
+        s = (dist + rad) * sigma * np.linalg.norm(jp, axis=2).max(axis=1)
+        out = np.maximum(out, s)
+    return out
+
+
+def _samples(obj: HiddenObject, vis: np.ndarray, fid: Fidelity, prune: bool, seed: int):
+    mesh = obj.mesh
+    s = surface_quadrature(mesh, fid.object_samples, seed=seed, face_mask=vis)
+    pts, nrm, area = s.points, s.normals, s.areas
+    n_hidden = 0
+    if not prune:
+        inv = (~vis) & (mesh.face_areas > 0)
+        a_vis, a_inv = mesh.face_areas[vis].sum(), mesh.face_areas[inv].sum()
+        n_inv = int(round(fid.object_samples * a_inv / a_vis)) if a_vis > 0 else fid.object_samples
+        if n_inv > 0 and a_inv > 0:
+            t = surface_quadrature(mesh, n_inv, seed=seed + 1, face_mask=inv)
+            pts, nrm, area = (np.concatenate([a, b]) for a, b in ((pts, t.points), (nrm, t.normals), (area, t.areas)))
+            n_hidden = n_inv
+    return pts, nrm, area, n_hidden
+
+
+def plan_object(
+    index: int,
+    obj_list: list[HiddenObject],
+    scene: Scene,
+    sensor: SensorConfig,
+    fid: Fidelity,
+    zones_out: np.ndarray,
+    grid: TimeGrid,
+    reach_ps: tuple[float, float],
+    prune: bool,
+) -> tuple[ObjectPlan | None, list]:
+    """Plan one object's term for all poses in ``obj_list``.
+
+    Returns ``(plan, notes)``; ``plan`` is None when nothing can contribute.
+    ``notes`` are ``(computed, name, reason)`` lines for :func:`explain`.
+
+    Parameters
+    ----------
+    index : int
+        Position of the object in the scene (seeds its sampling).
+    obj_list : list of HiddenObject
+        The object in every scene of the batch.
+    scene : Scene
+        The first scene (shared rig).
+    zones_out : ndarray of int
+        Flat zone indices the simulator outputs.
+    grid : TimeGrid
+        The sensor node grid.
+    reach_ps : (float, float)
+        Arrival times that can reach the window through the impulse response.
+    prune : bool
+        Leave out what cannot contribute (False: compute everything, for tests).
+    """
+    obj = obj_list[0]
+    label = f"object {obj.name!r}"
+    notes: list = []
+    vis = _visible_faces(obj_list, scene)
+    n_faces = len(vis)
+    if not np.any(vis):
+        notes.append((False, label, "no face of the object can see the relay wall in any pose"))
+        if prune:
+            return None, notes
+    pts, nrm, area, n_hidden = _samples(obj, vis, fid, prune, seed=fid.seed + 7919 * index)
+    n_points = len(pts)
+    pad = -(-max(n_points, 1) // SAMPLE_BUCKET) * SAMPLE_BUCKET - n_points  # zero-area padding: contributes nothing
+    if pad:
+        pts = np.concatenate([pts, np.repeat(pts[:1] if n_points else np.zeros((1, 3)), pad, axis=0)])
+        nrm = np.concatenate([nrm, np.repeat(nrm[:1] if n_points else np.array([[0.0, 0.0, 1.0]]), pad, axis=0)])
+        area = np.concatenate([area, np.zeros(pad)])
+    n_vis = int(vis.sum())
+    centers, radii = _bounding_spheres(obj_list)
+    retro = obj.reflectance == "retroreflective"
+    lobe_sigma = math.radians(obj.lobe_fwhm_deg) / FWHM_PER_SIGMA
+    lobe = retro and lobe_sigma > 0
+
+    ext = flash_extent_tan(sensor)
+    flash = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
+    zones_set = set(int(z) for z in zones_out)
+    row_of = {int(z): i for i, z in enumerate(zones_out)}
+    arrays: dict = {"points": pts, "normals": nrm, "areas": area, "lobe_sigma": np.array(lobe_sigma)}
+
+    if retro:
+        jac = _tangent_jacobian(scene, flash)
+        keep = np.isin(flash.zone, list(zones_set))
+        if lobe:
+            # cells whose lobe can reach a requested zone: within LOBE_SIGMAS spreads of one
+            spread = _lobe_spread(scene, flash, jac, centers, radii, lobe_sigma) * LOBE_SIGMAS
+            ue, ve = zone_edges_tan(sensor)
+            rows_, cols_ = np.divmod(np.array(sorted(zones_set)), sensor.zones_cols)
+            u, v = flash.uv[:, 0], flash.uv[:, 1]
+            near_zone = np.zeros(len(flash), bool)
+            for r_, c_ in zip(rows_, cols_):
+                du = np.maximum(np.maximum(ue[c_] - u, u - ue[c_ + 1]), 0.0)
+                dv = np.maximum(np.maximum(ve[r_ + 1] - v, v - ve[r_]), 0.0)
+                near_zone |= np.hypot(du, dv) <= spread
+            keep = near_zone
+        if not prune:
+            keep = np.ones(len(flash), bool)
+        left = int((~keep).sum())
+        if left:
+            notes.append((False, f"{label}: flash cells", f"{left} of {len(flash)} wall cells left out: a retroreflector "
+                          "returns light where it was lit, and they lie outside the requested zones"
+                          + (" beyond the lobe's reach" if lobe else "")))
+        flash, jac = flash.select(keep), jac[keep]
+        t_lo, t_hi = _leg_bounds(flash, centers, radii)
+        zone_lo = {z: 2 * t_lo[flash.zone == z].min() / C_M_PER_PS for z in zones_set if np.any(flash.zone == z)}
+        zone_hi = {z: 2 * t_hi[flash.zone == z].max() / C_M_PER_PS for z in zones_set if np.any(flash.zone == z)}
+        if lobe:  # a lobe can carry any cell's light into a neighbouring zone: use the all-cell range
+            lo_all, hi_all = 2 * t_lo.min() / C_M_PER_PS, 2 * t_hi.max() / C_M_PER_PS
+            zone_lo = {z: lo_all for z in zones_set}
+            zone_hi = {z: hi_all for z in zones_set}
+    else:
+        det = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.zone_sub), "zone")
+        det = det.select(np.isin(det.zone, list(zones_set)))
+        t1_lo, t1_hi = _leg_bounds(flash, centers, radii)
+        t2_lo, t2_hi = _leg_bounds(det, centers, radii)
+        zone_lo = {z: (t1_lo.min() + t2_lo[det.zone == z].min()) / C_M_PER_PS for z in zones_set if np.any(det.zone == z)}
+        zone_hi = {z: (t1_hi.max() + t2_hi[det.zone == z].max()) / C_M_PER_PS for z in zones_set if np.any(det.zone == z)}
+
+    no_wall = sorted(zones_set - set(zone_lo))
+    late = sorted(z for z in zone_lo if zone_lo[z] > reach_ps[1] or zone_hi[z] < reach_ps[0])
+    obj_zones = [z for z in zones_out if int(z) in zone_lo and (int(z) not in late or not prune)]
+    if no_wall:
+        notes.append((False, f"{label}: zones", f"{len(no_wall)} zone(s) see no relay wall, so no three-bounce light: "
+                      + _zone_names(no_wall, sensor)))
+    if late and prune:
+        notes.append((False, f"{label}: zones", f"{len(late)} zone(s) left out: their earliest three-bounce arrival is "
+                      f"after the window (or all before it): " + _zone_names(late, sensor)))
+    if not obj_zones:
+        lo = min(zone_lo.values()) if zone_lo else float("nan")
+        notes.append((False, label, f"outside the time window: earliest arrival {lo / 1000:.2f} ns, window reaches "
+                      f"{reach_ps[0] / 1000:.2f}..{reach_ps[1] / 1000:.2f} ns through the impulse response"))
+        return None, notes
+    zone_rows = np.array([row_of[int(z)] for z in obj_zones])
+    local_row = {int(z): i for i, z in enumerate(obj_zones)}
+    if not retro:  # detection cells of the computed zones only
+        det_rows = np.array([local_row.get(int(z), -1) for z in det.zone])
+        keep = det_rows >= 0
+        det, det_rows, t2_lo, t2_hi = det.select(keep), det_rows[keep], t2_lo[keep], t2_hi[keep]
+
+    # near field: cells an object point can come within NEAR_CELLS cell sizes of use the exact form
+    # factor; they are moved to the front so the transport handles them as one static block
+    n_near = {"1": 0, "2": 0}
+    for leg in ("1",) if retro else ("1", "2"):
+        cells = flash if leg == "1" else det
+        thr = NEAR_CELLS * np.sqrt(cells.area)
+        dmin = (np.linalg.norm(cells.centers[:, None] - centers[None], axis=-1) - radii[None]).min(axis=1)
+        near_mask = cells.has_polygon & (dmin < thr)
+        perm = np.concatenate([np.flatnonzero(near_mask), np.flatnonzero(~near_mask)])
+        n_near[leg] = int(near_mask.sum())
+        if leg == "1":
+            flash = flash.select(perm)
+            jac = jac[perm] if retro else None
+        else:
+            det, det_rows = det.select(perm), det_rows[perm]
+        cells = flash if leg == "1" else det
+        arrays.update({f"c{leg}t": cells.centers.T.copy(), f"k{leg}": cells.corners, f"a{leg}": cells.area,
+                       f"r{leg}": cells.r, f"thr{leg}": thr[perm]})
+    near = n_near["1"] + n_near["2"] > 0
+    h_min = min(float(scene.wall.signed_distance(o.world_vertices()).min()) for o in obj_list)
+    arrays["n_w"] = scene.wall.normal
+    arrays["w0"] = scene.wall.center
+    notes.append((near, f"{label}: near-wall quadrature",
+                  (f"object {h_min * 1000:.1f} mm from the wall: {n_near['1'] + n_near['2']} wall cells it can come "
+                   f"within {NEAR_CELLS:g} cell sizes of use the exact polygon form factor" if near else
+                   f"object >= {h_min * 100:.1f} cm from the wall, beyond {NEAR_CELLS:g} cell sizes of every cell: "
+                   "midpoint kernel within 0.5 %")))
+    # radiance of the wall cell per unit flash power: (albedo / pi) I dOmega / A
+    arrays["l1"] = scene.wall.albedo / math.pi * flash.weight / flash.area
+    delta = sensor.bin_width_ps / grid.oversample
+    t0 = sensor.start_offset_ps
+    lo_t, hi_t = max(min(zone_lo[z] for z in obj_zones), reach_ps[0]), min(max(zone_hi[z] for z in obj_zones), reach_ps[1])
+    m = n_points
+    if retro:
+        n1 = len(flash)
+        # receive factor: the lobe lands around x1, seen with s(omega) cos / r^2 (albedo / pi of the wall)
+        d_sensor = scene.lidar.points_to_sensor(flash.centers)
+        cosz = d_sensor[:, 2] / np.linalg.norm(d_sensor, axis=1)
+        sens = cosz**sensor.sensitivity_cos_power
+        arrays["recv"] = scene.wall.albedo / math.pi * sens * flash.cos / flash.r**2
+        k_lo = math.floor(float(grid.node_position(lo_t, sensor.bin_width_ps, t0))) - 1
+        k_hi = math.ceil(float(grid.node_position(hi_t, sensor.bin_width_ps, t0))) + 2
+        n_r = bucket(k_hi - k_lo)
+        arrays["k_r0"] = np.array(k_lo)
+        if lobe:
+            ue, ve = zone_edges_tan(sensor)
+            arrays.update(uv=flash.uv, jac=jac, u_edges=ue, nv_edges=-ve, obj_zones=np.array(obj_zones))
+        else:
+            onehot = np.zeros((n1, len(obj_zones)))
+            for i, z in enumerate(flash.zone):
+                if int(z) in local_row:
+                    onehot[i, local_row[int(z)]] = 1.0
+            arrays["frac"] = onehot
+        static = ObjectStatic("retroreflective", n_near["1"], 0, lobe, len(obj_zones), n_r=n_r)
+        paths = m * n1
+        how = (f"retroreflective ({obj.lobe_fwhm_deg:g} deg lobe), {m} surface samples on {n_vis} of {n_faces} faces"
+               f" x {n1} lit wall cells = {paths:,} paths")
+    else:
+        t1_lo_all, t1_hi_all = t1_lo.min() / C_M_PER_PS, t1_hi.max() / C_M_PER_PS
+        t2_lo_all, t2_hi_all = t2_lo.min() / C_M_PER_PS, t2_hi.max() / C_M_PER_PS
+        t1_hi_all = min(t1_hi_all, reach_ps[1] - t2_lo_all)
+        t2_hi_all = min(t2_hi_all, reach_ps[1] - t1_lo_all)
+        j1 = math.floor((t1_lo_all - t0) / delta - 0.5) - 1
+        n1 = bucket(math.ceil((t1_hi_all - t0) / delta - 0.5) + 2 - j1)
+        j2 = math.floor(t2_lo_all / delta) - 1
+        n2 = bucket(math.ceil(t2_hi_all / delta) + 2 - j2)
+        arrays.update(row2=det_rows, l2=scene.wall.albedo / math.pi * det.weight / det.area,
+                      j1=np.array(j1), j2=np.array(j2), shift=np.array(j1 + j2 - grid.first_bin * grid.oversample))
+        fft_len = n1 + n2
+        static = ObjectStatic("lambertian", n_near["1"], n_near["2"], False, len(obj_zones), n1=n1, n2=n2, fft_len=fft_len)
+        paths = m * (len(flash) + len(det))
+        how = (f"Lambertian, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
+               f"wall cells, detection leg {m} x {len(det)} zone cells, legs convolved in time")
+    notes.insert(0, (True, label, how))
+    if n_hidden:
+        notes.append((True, f"{label}: back faces", f"pruning off: {n_hidden} extra samples on faces that cannot see the wall"))
+    elif n_vis < int((obj.mesh.face_areas > 0).sum()):
+        notes.append((False, f"{label}: back faces",
+                      f"{int((obj.mesh.face_areas > 0).sum()) - n_vis} faces cannot see the wall in any pose"))
+    return ObjectPlan(static=static, arrays=arrays, zone_rows=zone_rows, paths=paths), notes
+
+
+def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:
+    names = [f"({z // sensor.zones_cols},{z % sensor.zones_cols})" for z in zones[:limit]]
+    return ", ".join(names) + (f" and {len(zones) - limit} more" if len(zones) > limit else "")
