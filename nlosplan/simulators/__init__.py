@@ -1,10 +1,53 @@
 """Scenes and light transport.
 
-This room currently holds the flat-wall scene (first bounce of the flash off
-a Lambertian wall), the scene of the ``nlosplan simulate`` default job and of
-the time-base calibration. The three-bounce NLOS transport builds on it.
+- Scenes: :class:`Scene` (LiDAR pose, relay wall, planes, hidden objects),
+  presets :func:`denali_scene` (the DENALI rig) and :func:`corner_scene`.
+- Transport: the fast JAX backend (:class:`FastSimulator`), behind the
+  backend-independent :func:`expected_histogram`, :func:`sample`,
+  :func:`background_histogram`, :func:`explain` and :func:`simulate`.
+- :func:`simulate_wall`: a sensor facing a plain wall (first bounce only),
+  the scene of the time-base calibration.
 """
 
+from nlosplan.simulators.api import (
+    BACKENDS,
+    SimulationResult,
+    background_histogram,
+    expected_histogram,
+    explain,
+    sample,
+    simulate,
+)
+from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity
+from nlosplan.simulators.meshes import load_obj, sample_surface, square_patch, surface_quadrature
+from nlosplan.simulators.presets import corner_scene, denali_scene
+from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, NLOSWarning, Rect, Scene
 from nlosplan.simulators.wall import WallScene, simulate_wall, wall_arrivals
 
-__all__ = ["WallScene", "simulate_wall", "wall_arrivals"]
+__all__ = [
+    "BACKENDS",
+    "FIDELITY_LEVELS",
+    "FastSimulator",
+    "Fidelity",
+    "HiddenObject",
+    "LidarPose",
+    "Mesh",
+    "NLOSWarning",
+    "Rect",
+    "Scene",
+    "SimulationResult",
+    "WallScene",
+    "background_histogram",
+    "corner_scene",
+    "denali_scene",
+    "expected_histogram",
+    "explain",
+    "load_obj",
+    "sample",
+    "sample_surface",
+    "simulate",
+    "simulate_wall",
+    "square_patch",
+    "surface_quadrature",
+    "wall_arrivals",
+]
