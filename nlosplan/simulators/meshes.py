@@ -250,8 +250,46 @@ def _normal_bins(normals: np.ndarray, step_deg: float = 20.0) -> np.ndarray:
     return ring * 1000 + sector
 
 
+def _fine_cells(mesh: Mesh, sel: np.ndarray, max_edge: float, max_area: float, max_cells: int):
+    """Split the selected faces by longest-edge bisection into small triangles.
+
+    A triangle is halved (its longest edge cut at the midpoint) until its
+    longest edge is at most ``max_edge`` and its area at most ``max_area``
+    (or the ``max_cells`` budget is reached). Slivers thus become a row of
+    pieces along their length rather than k^2 congruent slivers.
+
+    Returns centroids (K, 3), exact areas (K,), face index (K,).
+    """
+    tri = mesh.triangles[sel]
+    face = np.flatnonzero(sel)
+    done_t, done_f = [], []
+    n_done = 0
+    while len(tri):
+        edges = np.roll(tri, -1, axis=1) - tri  # edge i from vertex i to i+1
+        length = np.linalg.norm(edges, axis=2)
+        area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
+        split = (length.max(axis=1) > max_edge) | (area > max_area)
+        if n_done + len(tri) + int(split.sum()) > max_cells:
+            split[:] = False
+        done_t.append(tri[~split])
+        done_f.append(face[~split])
+        n_done += int((~split).sum())
+        tri, face, length = tri[split], face[split], length[split]
+        if not len(tri):
+            break
+        i = np.argmax(length, axis=1)  # cut edge i (vertices i, i+1) at its midpoint
+        rows = np.arange(len(tri))
+        a, b, c = tri[rows, i], tri[rows, (i + 1) % 3], tri[rows, (i + 2) % 3]
+        mid = 0.5 * (a + b)
+        tri = np.concatenate([np.stack([a, mid, c], 1), np.stack([mid, b, c], 1)])
+        face = np.concatenate([face, face])
+    tri, face = np.concatenate(done_t), np.concatenate(done_f)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return tri.mean(axis=1), area, face
+
+
 def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = None, seed: int = 0,
-                       oversample: int = 16, iterations: int = 6) -> SurfaceSamples:
+                       oversample: int = 16, iterations: int = 8, max_cells: int = 400_000) -> SurfaceSamples:
     """About ``n`` spatially compact, area-weighted quadrature points on a mesh surface.
 
     Parameters
@@ -262,41 +300,53 @@ def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = Non
     face_mask : array_like of bool, shape (F,), optional
         Only these faces.
     seed : int
-        Seed of the oversampling.
+        Unused by the deterministic construction; kept so callers can vary
+        sampling-based variants without changing signatures.
     oversample : int
-        Random samples drawn per quadrature point.
+        Fine sub-triangles per quadrature point (about).
     iterations : int
         Lloyd iterations refining the clusters.
+    max_cells : int
+        Cap on the number of fine sub-triangles (work bound).
 
     Returns
     -------
     SurfaceSamples
-        Points whose areas sum exactly to the selected area
-        (``face_index`` is the face of the sample nearest to each centroid).
+        Points whose areas sum exactly to the selected area.
 
     Notes
     -----
-    ``oversample * n`` stratified samples (:func:`sample_surface`) are grouped
-    by normal direction (about 20 degree bins, so a point never averages the
-    front and the side of an object); each group gets points in proportion
-    to its area, starts as runs of equal area along a Morton curve, and is
-    made compact by Lloyd (k-means) iterations. A point is the sample nearest
-    its cluster's centroid (so it lies on the surface, also for clusters
-    that straddle a hole), with the cluster's mean normal and total area.
-    Clusters are compact, so this is a midpoint rule on cells of size
-    ``h ~ (A / n)^(1/2)`` whatever the triangulation (sliver faces of a
-    fan-triangulated disc included): error ``O(h^2)``, against ``O(n^-1/2)``
-    for the raw random samples.
+    The faces are split by longest-edge bisection into triangles with edges
+    at most ``h / 2`` (``h = sqrt(A / n)``) and about ``oversample`` per
+    point, whose areas are exact.
+    They are grouped by normal direction (about 20 degree bins, so a point
+    never averages the front and the side of an object); each group gets
+    points in proportion to its area, starts as runs of equal area along a
+    Morton curve, and is made compact by area-weighted Lloyd (k-means)
+    iterations. A point is the sub-triangle centroid nearest its cluster's
+    centroid (so it lies on the surface), carrying the cluster's exact area
+    and mean normal. Clusters are compact whatever the triangulation (the
+    sliver faces of a fan-triangulated disc included), so this is a midpoint
+    rule on cells of size ``h``: error ``O(h^2) = O(1/n)`` for smooth
+    integrands, against ``O(n^-1/2)`` for random samples.
     """
+    del seed
+    if not isinstance(mesh, Mesh):
+        raise UserError(f"surface_quadrature needs a Mesh, got {type(mesh).__name__}")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or int(n) < 0:
         raise UserError(f"number of quadrature points n={n!r} must be an integer >= 0")
     n = int(n)
-    raw = sample_surface(mesh, n * int(oversample), seed=seed, face_mask=face_mask)
-    if n == 0 or len(raw) == 0:
+    sel = mesh.face_areas > 0
+    if face_mask is not None:
+        sel &= np.asarray(face_mask, dtype=bool)
+    total = float(mesh.face_areas[sel].sum())
+    if n == 0 or total <= 0:
         return _empty()
-    labels = _normal_bins(raw.normals)
+    h = np.sqrt(total / n)  # cluster size
+    cen, area, face = _fine_cells(mesh, sel, 0.5 * h, total / n / oversample, max_cells)
+    labels = _normal_bins(mesh.face_normals[face])
     groups = [np.flatnonzero(labels == g) for g in np.unique(labels)]
-    share = np.array([len(g) for g in groups], float) / len(raw) * n
+    share = np.array([area[g].sum() for g in groups]) / total * n
     counts = np.maximum(1, np.floor(share)).astype(np.int64)
     for i in np.argsort(-(share - np.floor(share))):  # largest remainders get the leftover points
         if counts.sum() >= n:
@@ -304,37 +354,37 @@ def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = Non
         counts[i] += 1
     pts, nrm, wts, idx = [], [], [], []
     for g, c in zip(groups, counts):
-        members = _lloyd(raw.points[g], int(min(c, len(g))), iterations)
-        for run in members:
+        for run in _lloyd(cen[g], area[g], int(min(c, len(g))), iterations):
             run = g[run]
-            p = raw.points[run].mean(axis=0)
-            nearest = run[np.argmin(np.linalg.norm(raw.points[run] - p, axis=1))]  # stay on the surface
-            nr = raw.normals[run].sum(axis=0)
-            pts.append(raw.points[nearest])
+            w = area[run]
+            p = (cen[run] * w[:, None]).sum(axis=0) / w.sum()
+            nearest = run[np.argmin(np.linalg.norm(cen[run] - p, axis=1))]  # stay on the surface
+            nr = (mesh.face_normals[face[run]] * w[:, None]).sum(axis=0)
+            pts.append(cen[nearest])
             nrm.append(nr / np.linalg.norm(nr))
-            wts.append(raw.areas[run].sum())
-            idx.append(raw.face_index[nearest])
+            wts.append(w.sum())
+            idx.append(face[nearest])
     return SurfaceSamples(points=np.array(pts), normals=np.array(nrm), areas=np.array(wts),
                           face_index=np.array(idx, dtype=np.int64))
 
 
-def _lloyd(points: np.ndarray, k: int, iterations: int) -> list[np.ndarray]:
-    """Split points into ``k`` compact clusters: Morton-curve runs refined by Lloyd iterations.
+def _lloyd(points: np.ndarray, weights: np.ndarray, k: int, iterations: int) -> list[np.ndarray]:
+    """Split weighted points into ``k`` compact clusters.
 
-    Returns the member indices of each non-empty cluster.
+    Runs of equal weight along a Morton curve, refined by weighted Lloyd
+    iterations. Returns the member indices of each non-empty cluster.
     """
     from scipy.spatial import cKDTree
 
     order = _morton_order(points)
-    runs = np.array_split(order, k)
+    cum = np.cumsum(weights[order])
     label = np.empty(len(points), np.int64)
-    for i, r in enumerate(runs):
-        label[r] = i
+    label[order] = np.minimum((cum - 0.5 * weights[order]) / cum[-1] * k, k - 1).astype(np.int64)
     for _ in range(iterations):
-        count = np.bincount(label, minlength=k)
-        live = count > 0
-        centers = np.stack([np.bincount(label, points[:, a], minlength=k) for a in range(3)], axis=1)
-        centers = centers[live] / count[live, None]
+        w = np.bincount(label, weights, minlength=k)
+        live = w > 0
+        centers = np.stack([np.bincount(label, weights * points[:, a], minlength=k) for a in range(3)], axis=1)
+        centers = centers[live] / w[live, None]
         label = cKDTree(centers).query(points)[1]
         k = len(centers)
     order = np.argsort(label, kind="stable")

@@ -24,7 +24,8 @@ from nlosplan.constants import C_M_PER_PS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import expected_histogram, sample_histogram
-from nlosplan.sensor_models.zones import zone_rays
+from nlosplan.simulators.fast.geometry import direct_returns
+from nlosplan.simulators.scene import LidarPose, Rect
 
 
 @dataclass(frozen=True)
@@ -86,20 +87,18 @@ def wall_arrivals(scene: WallScene, sensor: SensorConfig, n_sub: int = 4) -> tup
         Transport weights (1/m^2 per unit flash power); 0 where a sub-ray
         misses the wall.
     """
-    rays = zone_rays(sensor, n_sub)
+    if n_sub < 1:
+        raise ValueError("n_sub must be >= 1")
+    lidar = LidarPose(position=(0.0, 0.0, 0.0), right=(1.0, 0.0, 0.0), up=(0.0, 1.0, 0.0), forward=(0.0, 0.0, 1.0))
     n = scene.normal()
-    p0 = np.array([0.0, 0.0, scene.distance_m])
-    denom = rays.directions @ n  # negative when the ray meets the front face
-    hits = denom < -1e-12
-    safe = np.where(hits, denom, -1.0)
-    r = (p0 @ n) / safe
-    hits &= r > 0
-    r = np.where(hits, r, 1.0)
-    cos_a = -safe
-    w = rays.flash * rays.sensitivity * rays.solid_angle * (scene.albedo / math.pi) * cos_a / (r * r)
-    w = np.where(hits, w, 0.0)
-    t = 2.0 * r / C_M_PER_PS
-    return t, w
+    # the plane through (0, 0, d) facing the sensor; "infinite" (1000 km), in-plane axes with u x v = n
+    helper = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(helper, n)
+    wall = Rect(center=(0.0, 0.0, scene.distance_m), u_axis=u, v_axis=np.cross(n, u), half_u=1e6, half_v=1e6,
+                albedo=scene.albedo, name="wall")
+    path, w, _ = direct_returns(lidar, (wall,), sensor, n_sub)
+    shape = (sensor.zones_rows, sensor.zones_cols, n_sub * n_sub)
+    return (path / C_M_PER_PS).reshape(shape), w.reshape(shape)
 
 
 def simulate_wall(scene: WallScene, sensor: SensorConfig, *, n_sub: int = 4, rng: int | None = None, repeats: int = 1):
