@@ -91,6 +91,11 @@ class SimPlan:
         Path evaluations per scene.
     object_index : tuple of int
         Index into ``scene.objects`` of each computed object term.
+    object_samples : tuple of list
+        Per computed object term, the surface quadrature of each distinct
+        mesh (points, normals, areas; object frame, one padded size).
+    object_mesh_index : tuple of ndarray
+        Per computed object term, which quadrature each scene uses, shape (N,).
     """
 
     static: PlanStatic
@@ -103,6 +108,8 @@ class SimPlan:
     fidelity: Fidelity
     paths: int
     object_index: tuple = ()
+    object_samples: tuple = ()
+    object_mesh_index: tuple = ()
 
     def explain(self) -> str:
         """Text table of computed and left-out terms with the reason for each."""
@@ -155,12 +162,12 @@ def _check_batch(scenes: list[Scene]) -> None:
             and _same_rect(s.wall, base.wall) and len(s.planes) == len(base.planes)
             and all(_same_rect(a, b) for a, b in zip(s.planes, base.planes))
             and len(s.objects) == len(base.objects)
-            and all(a.mesh is b.mesh and a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg
+            and all(a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg
                     for a, b in zip(s.objects, base.objects))
         )
         if not same:
-            raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes) and the object meshes and "
-                            "reflectance; only object poses, albedos and lights may differ")
+            raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes), the number of objects and "
+                            "their reflectance models; object meshes, poses, albedos and lights may differ")
 
 
 def _same_rect(a, b) -> bool:
@@ -317,5 +324,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     }
     paths = int(np.sum(w > 0)) + sum(o.paths for o in obj_plans)
     return SimPlan(static=static, arrays=arrays, zones=zones_out, full_grid=full_grid, terms=tuple(terms),
-                   warnings=tuple(warnings), sensor=sensor, fidelity=fid, paths=paths, object_index=tuple(obj_index))
+                   warnings=tuple(warnings), sensor=sensor, fidelity=fid, paths=paths, object_index=tuple(obj_index),
+                   object_samples=tuple(o.samples for o in obj_plans),
+                   object_mesh_index=tuple(o.mesh_index for o in obj_plans))
 

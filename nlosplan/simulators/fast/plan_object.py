@@ -59,22 +59,29 @@ class ObjectPlan:
     ----------
     static : ObjectStatic
     arrays : dict of ndarray
-        Surface samples (object frame), wall cells and node offsets (see
+        Wall cells, lobe geometry and node offsets (see
         :mod:`nlosplan.simulators.fast.transport`).
     zone_rows : ndarray of int
         Rows of the simulator's output zones that receive this term.
     paths : int
         Path evaluations per scene.
+    samples : list of (points (M, 3), normals (M, 3), areas (M,))
+        Surface quadrature of each distinct mesh in the batch (object frame,
+        padded to one size ``M``); they are dynamic scene parameters.
+    mesh_index : ndarray of int, shape (N,)
+        Which entry of ``samples`` each scene of the batch uses.
     """
 
     static: ObjectStatic
     arrays: dict
     zone_rows: np.ndarray
     paths: int
+    samples: list
+    mesh_index: np.ndarray
 
 
 def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
-    """Faces that can see some part of the wall, and lie in front of it, in any pose."""
+    """Faces of ``obj_list[0].mesh`` that see some part of the wall, in front of it, in any pose of the list."""
     mesh = obj_list[0].mesh
     tri, fn, fa = mesh.triangles, mesh.face_normals, mesh.face_areas
     corners = scene.wall.corners()
@@ -93,6 +100,20 @@ def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
         front = np.max(scene.wall.signed_distance(tw), axis=1) > 0
         vis |= sees & front
     return vis & (fa > 0)
+
+
+def _by_mesh(obj_list: list[HiddenObject]) -> tuple[list[list[HiddenObject]], np.ndarray]:
+    """Group the batch by mesh: the groups, and each scene's group index (N,)."""
+    groups: list[list[HiddenObject]] = []
+    where: dict[int, int] = {}
+    index = np.empty(len(obj_list), np.int64)
+    for i, obj in enumerate(obj_list):
+        k = where.setdefault(id(obj.mesh), len(groups))
+        if k == len(groups):
+            groups.append([])
+        groups[k].append(obj)
+        index[i] = k
+    return groups, index
 
 
 def _bounding_spheres(obj_list: list[HiddenObject]) -> tuple[np.ndarray, np.ndarray]:
@@ -139,6 +160,17 @@ def _lobe_spread(scene: Scene, cells: WallCells, jac: np.ndarray, centers: np.nd
         s = (dist + rad) * sigma * np.linalg.norm(jp, axis=2).max(axis=1)
         out = np.maximum(out, s)
     return out
+
+
+def _pad(pts: np.ndarray, nrm: np.ndarray, area: np.ndarray, size: int) -> tuple[np.ndarray, ...]:
+    """Pad surface points to ``size`` with zero-area copies (they contribute exactly nothing)."""
+    pad = size - len(pts)
+    if pad <= 0:
+        return pts, nrm, area
+    p0 = pts[:1] if len(pts) else np.zeros((1, 3))
+    n0 = nrm[:1] if len(nrm) else np.array([[0.0, 0.0, 1.0]])
+    return (np.concatenate([pts, np.repeat(p0, pad, 0)]), np.concatenate([nrm, np.repeat(n0, pad, 0)]),
+            np.concatenate([area, np.zeros(pad)]))
 
 
 def _samples(obj: HiddenObject, vis: np.ndarray, fid: Fidelity, prune: bool, seed: int):
@@ -191,22 +223,21 @@ def plan_object(
         Leave out what cannot contribute (False: compute everything, for tests).
     """
     obj = obj_list[0]
-    label = f"object {obj.name!r}"
+    label = f"object {obj.name!r}" if len({id(o.mesh) for o in obj_list}) == 1 else f"objects ({obj.reflectance})"
     notes: list = []
-    vis = _visible_faces(obj_list, scene)
-    n_faces = len(vis)
-    if not np.any(vis):
+    groups, mesh_index = _by_mesh(obj_list)
+    vis_list = [_visible_faces(g, scene) for g in groups]
+    if not any(np.any(v) for v in vis_list):
         notes.append((False, label, "no face of the object can see the relay wall in any pose"))
         if prune:
             return None, notes
-    pts, nrm, area, n_hidden = _samples(obj, vis, fid, prune, seed=fid.seed + 7919 * index)
-    n_points = len(pts)
-    pad = -(-max(n_points, 1) // SAMPLE_BUCKET) * SAMPLE_BUCKET - n_points  # zero-area padding: contributes nothing
-    if pad:
-        pts = np.concatenate([pts, np.repeat(pts[:1] if n_points else np.zeros((1, 3)), pad, axis=0)])
-        nrm = np.concatenate([nrm, np.repeat(nrm[:1] if n_points else np.array([[0.0, 0.0, 1.0]]), pad, axis=0)])
-        area = np.concatenate([area, np.zeros(pad)])
-    n_vis = int(vis.sum())
+    sets = [_samples(g[0], v, fid, prune, seed=fid.seed + 7919 * index) for g, v in zip(groups, vis_list)]
+    n_points = max(len(p) for p, *_ in sets)
+    size = -(-max(n_points, 1) // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    samples = [_pad(p, n, a, size) for p, n, a, _ in sets]  # zero-area padding contributes nothing
+    n_hidden = max(h for *_, h in sets)
+    n_vis = int(vis_list[0].sum())
+    n_faces = len(vis_list[0])
     centers, radii = _bounding_spheres(obj_list)
     retro = obj.reflectance == "retroreflective"
     lobe_sigma = math.radians(obj.lobe_fwhm_deg) / FWHM_PER_SIGMA
@@ -216,7 +247,7 @@ def plan_object(
     flash = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
     zones_set = set(int(z) for z in zones_out)
     row_of = {int(z): i for i, z in enumerate(zones_out)}
-    arrays: dict = {"points": pts, "normals": nrm, "areas": area, "lobe_sigma": np.array(lobe_sigma)}
+    arrays: dict = {"lobe_sigma": np.array(lobe_sigma)}
 
     if retro:
         jac = _tangent_jacobian(scene, flash)
@@ -356,7 +387,8 @@ def plan_object(
     elif n_vis < int((obj.mesh.face_areas > 0).sum()):
         notes.append((False, f"{label}: back faces",
                       f"{int((obj.mesh.face_areas > 0).sum()) - n_vis} faces cannot see the wall in any pose"))
-    return ObjectPlan(static=static, arrays=arrays, zone_rows=zone_rows, paths=paths), notes
+    return ObjectPlan(static=static, arrays=arrays, zone_rows=zone_rows, paths=paths, samples=samples,
+                      mesh_index=mesh_index), notes
 
 
 def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:

@@ -70,8 +70,9 @@ class FastSimulator:
     Parameters
     ----------
     scenes : Scene or list of Scene
-        One scene, or scenes that share the rig and differ in object poses,
-        albedos and lights (e.g. the 100 DENALI positions of one object).
+        One scene, or scenes that share the rig and the objects' reflectance
+        models and differ in object meshes, poses, albedos and lights (e.g.
+        every DENALI object at every position).
     sensor : SensorConfig
     fidelity : str, dict or Fidelity
         Quadrature/sampling level (``draft``, ``low``, ``default``, ``high``,
@@ -114,10 +115,18 @@ class FastSimulator:
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
-        """Batched dynamic parameters ``(scene_p, sensor_p)`` with leading axes (N,) and (S,)."""
-        scene_p = _stack([scene_params(s, self.plan.object_index) for s in self.scenes])
-        sensor_p = _stack([sensor_params(s) for s in self.sensors])
-        return scene_p, sensor_p
+        """Batched dynamic parameters ``(scene_p, sensor_p)`` with leading axes (N,) and (S,).
+
+        ``scene_p["objects"][k]`` holds the pose ``to_world`` (4, 4), the
+        ``albedo`` and the object's surface quadrature (``points``,
+        ``normals``, ``areas``, object frame) of every scene.
+        """
+        per_scene = [scene_params(s, self.plan.object_index) for s in self.scenes]
+        for k, (samples, index) in enumerate(zip(self.plan.object_samples, self.plan.object_mesh_index)):
+            for sp, i in zip(per_scene, index):
+                pts, nrm, area = samples[i]
+                sp["objects"][k].update(points=pts, normals=nrm, areas=area)
+        return _stack(per_scene), _stack([sensor_params(s) for s in self.sensors])
 
     def function(self, parts: bool = False):
         """Pure ``f(scene_p, sensor_p) -> counts (Z, bins)`` for one scene and sensor.

@@ -46,9 +46,10 @@ def gaussian_sigma(pulse_fwhm_ps, jitter_fwhm_ps):
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, s2, 1.0)), 0.0) / FWHM_PER_SIGMA
 
 
-def _pose(a, to_world):
-    r, t = to_world[:3, :3], to_world[:3, 3]
-    return a["points"] @ r.T + t, a["normals"] @ r.T
+def _pose(p):
+    """Surface points and normals of an object in the world, (M, 3) each."""
+    r, t = p["to_world"][:3, :3], p["to_world"][:3, 3]
+    return p["points"] @ r.T + t, p["normals"] @ r.T
 
 
 def _coupling(a, leg: str, x, n, n_near: int):
@@ -67,9 +68,8 @@ def _coupling(a, leg: str, x, n, n_near: int):
     return c, dist
 
 
-def _lobe_fractions(a, x, sigma):
+def _lobe_fractions(a, x, w, sigma):
     """Share of each cell's retro lobe landing in each object zone, shape (N1, Zobj)."""
-    w = a["areas"]
     centroid = (x * w[:, None]).sum(0) / jnp.maximum(w.sum(), 1e-30)
     e = a["c1t"].T - centroid
     dbar = jnp.sqrt(jnp.sum(e * e, -1))
@@ -87,20 +87,20 @@ def _lobe_fractions(a, x, sigma):
 
 
 def _retro(st, a, p, grid, bw, t0):
-    x, n = _pose(a, p["to_world"])
+    x, n = _pose(p)
     c, dist = _coupling(a, "1", x, n, st.near1)
-    w = a["l1"][None] * c * (p["albedo"] * a["areas"][:, None]) * a["recv"][None]
+    w = a["l1"][None] * c * (p["albedo"] * p["areas"][:, None]) * a["recv"][None]
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
     n1 = a["a1"].shape[0]
     rows = jnp.broadcast_to(jnp.arange(n1)[None], w.shape)
     per_cell = deposit_at(pos, w, rows, n1, st.n_r)  # (N1, n_r)
-    frac = _lobe_fractions(a, x, a["lobe_sigma"]) if st.lobe else a["frac"]
+    frac = _lobe_fractions(a, x, p["areas"], a["lobe_sigma"]) if st.lobe else a["frac"]
     return frac.T @ per_cell, a["k_r0"]
 
 
 def _lambertian(st, a, p, grid, bw, t0):
-    x, n = _pose(a, p["to_world"])
+    x, n = _pose(p)
     m = x.shape[0]
     delta = bw / grid.oversample
     c1, d1 = _coupling(a, "1", x, n, st.near1)
@@ -108,7 +108,7 @@ def _lambertian(st, a, p, grid, bw, t0):
     rows1 = jnp.broadcast_to(jnp.arange(m)[:, None], c1.shape)
     leg1 = deposit_at((t1 - t0) / delta - 0.5 - a["j1"], a["l1"][None] * c1, rows1, m, st.n1)
     c2, d2 = _coupling(a, "2", x, n, st.near2)
-    w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * a["areas"][:, None]
+    w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * p["areas"][:, None]
     t2 = (d2 + a["r2"][None]) / C_M_PER_PS
     rows2 = jnp.arange(m)[:, None] * st.n_rows + a["row2"][None]
     leg2 = deposit_at(t2 / delta - a["j2"], w2, rows2, m * st.n_rows, st.n2).reshape(m, st.n_rows, st.n2)
@@ -147,7 +147,8 @@ def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
     arrays : dict
         Plan arrays as JAX arrays.
     scene_p : dict
-        ``{"objects": [{"to_world": (4, 4), "albedo": ()}...], "lights": ()}``.
+        ``{"objects": [{"to_world": (4, 4), "albedo": (), "points": (M, 3),
+        "normals": (M, 3), "areas": (M,)}...], "lights": ()}``.
     sensor_p : dict
         The dynamic sensor fields (scalars), see ``DYNAMIC_SENSOR_FIELDS``.
     parts : bool
