@@ -10,6 +10,7 @@ import argparse
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from nlosplan import __version__
@@ -73,6 +74,10 @@ def _cmd_sensor_fit(args) -> int:
 
 
 # ----------------------------------------------------------------- simulate
+SCENES = ("denali", "corner", "wall")
+NLOS_SCENES = ("denali", "corner")
+
+
 def _sensor_from_args(args):
     from nlosplan.sensor_models import resolve_sensor
 
@@ -93,24 +98,229 @@ def _sensor_from_args(args):
     return s.replace(**changes) if changes else s
 
 
-def _cmd_simulate(args) -> int:
+def _check_scene_options(args) -> None:
+    """Reject an option given for a scene it does not apply to (one line, exit 2)."""
+    for dest, (flag, scenes) in args.scene_options.items():
+        value = getattr(args, dest)
+        if value is not None and args.scene not in scenes:
+            shown = flag if value is True else f"{flag} {value}"
+            allowed = " or ".join(f"--scene {s}" for s in scenes)
+            raise UserError(f"{shown} applies only to {allowed}, not to --scene {args.scene}")
+
+
+def _given(args, **names: str) -> dict:
+    """Keyword arguments ``{kwarg: args.<dest>}`` for the options the user gave (the rooms' defaults hold otherwise)."""
+    return {kw: getattr(args, dest) for kw, dest in names.items() if getattr(args, dest) is not None}
+
+
+def _parse_xy(text: str) -> tuple[float, float]:
+    """``--object-xy X,Y`` as two floats (metres); the corner scene checks the values."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise UserError(f"--object-xy {text!r} must be two numbers X,Y in metres, e.g. 0.45,0.30 "
+                        "(write --object-xy=-0.2,0.3 for a negative X)") from None
+    return x, y
+
+
+def _parse_zones(text: str) -> list[tuple[int, int]]:
+    """``--only-zones "R,C;R,C"`` as (row, col) pairs; the simulator checks them against the zone grid."""
+    try:
+        zones = [tuple(int(v) for v in item.split(",")) for item in text.split(";") if item.strip()]
+    except ValueError:
+        zones = []
+    if not zones or any(len(z) != 2 for z in zones):
+        raise UserError(f"--only-zones {text!r} must be ROW,COL pairs separated by ';', e.g. '1,1;0,2'")
+    return zones
+
+
+def _npy_path(text: str) -> Path:
+    """``--out`` as the path ``numpy.save`` will write (it appends ``.npy`` when missing)."""
+    out = Path(text)
+    return out if out.suffix == ".npy" else out.with_name(out.name + ".npy")
+
+
+def _progress(args, message: str) -> None:
+    """One line on stderr before long work, only for a person watching a terminal (not with --json)."""
+    if not args.json and sys.stderr.isatty():
+        print(message, file=sys.stderr, flush=True)
+
+
+def _with_warning_lines(func, *a, **kw):
+    """Call ``func``; print each NLOSWarning it issues as one ``nlosplan: warning:`` line on stderr.
+
+    Returns
+    -------
+    result
+        What ``func`` returned.
+    list of str
+        The warning messages, in order, without repeats.
+    """
+    from nlosplan.simulators import NLOSWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NLOSWarning)
+        result = func(*a, **kw)
+    messages: list[str] = []
+    for w in caught:
+        if not issubclass(w.category, NLOSWarning):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+            continue
+        text = " ".join(str(w.message).split())
+        if text not in messages:
+            messages.append(text)
+            print(f"nlosplan: warning: {text}", file=sys.stderr)
+    return result, messages
+
+
+def _nlos_scene(args):
+    """The DENALI or corner scene from the options given."""
+    from nlosplan.simulators import corner_scene, denali_scene
+
+    common = _given(args, reflectance="reflectance", albedo="object_albedo", lobe_fwhm_deg="lobe_deg")
+    if args.scene == "denali":
+        return denali_scene(**_given(args, obj="object", size="size", position="position", mount="mount"),
+                            lights=args.lights, **common)
+    xy = {} if args.object_xy is None else {"object_xy": _parse_xy(args.object_xy)}
+    return corner_scene(**_given(args, wall_distance="wall_distance", object="object", object_size="object_size",
+                                 yaw_deg="object_yaw"), **xy, lights_on=args.lights == "on", **common)
+
+
+def _save_nlos(result, out: Path) -> dict:
+    """Write the expected, background, signal and count arrays beside ``out``; return ``{name: path}``."""
+    import numpy as np
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    arrays = {"expected": result.expected, "background": result.background, "signal": result.signal,
+              "counts": result.counts, "background_counts": result.background_counts}
+    files = {}
+    for key, arr in arrays.items():
+        if arr is not None:
+            path = out if key == "expected" else out.with_name(f"{out.stem}_{key}.npy")
+            np.save(path, arr)
+            files[key] = str(path)
+    return files
+
+
+def _nlos_title(args, meta: dict, sensor, fidelity: str) -> str:
+    """Two-line plot title: scene, object, position or place, reflectance, lights; sensor, jitter, fidelity."""
+    if args.scene == "denali":
+        mount = " + mount" if args.mount else ""
+        what = f"DENALI {meta['object']}_{meta['size']}{mount} at gantry position {meta['position']}"
+    else:
+        x, y = meta["object_xy"]
+        what = (f"corner: {meta['object']} at x = {x:g} m, {y:g} m in front of a relay wall "
+                f"{meta['wall_distance']:g} m away")
+    return (f"{what}, {meta['reflectance']}, lights {args.lights}\n"
+            f"{sensor.name} ({sensor.zones_rows}x{sensor.zones_cols} zones, {sensor.n_bins} bins), "
+            f"jitter {sensor.jitter_fwhm_ps:g} ps, fidelity {fidelity}")
+
+
+def _signal_peaks(signal):
+    """Bin of the largest signal per zone, ``None`` where the object adds nothing (nested lists)."""
+    import numpy as np
+
+    peaks = signal.argmax(-1).astype(object)
+    return np.where(signal.max(-1) > 0, peaks, None).tolist()
+
+
+def _peak_lines(peaks, zones) -> list[str]:
+    """The signal peak bins as a small grid (or one line per requested zone)."""
+    show = lambda p: "-" if p is None else str(p)  # noqa: E731
+    if zones is not None:
+        return [f"  zone ({r},{c}): {show(p)}" for (r, c), p in zip(zones, peaks)]
+    width = max(len(show(p)) for row in peaks for p in row)
+    return ["  " + " ".join(f"{show(p):>{width}}" for p in row) for row in peaks]
+
+
+def _nlos_summary(args, scene, sensor, result, zones, fidelity: str, files: dict, warned: list) -> tuple[dict, str]:
+    """The JSON summary and the text lines of a DENALI or corner run.
+
+    Returns
+    -------
+    data : dict
+        Scene kind and labels, sensor, shape, totals (expected, background,
+        signal), signal peak bin per zone, seconds, files, warnings, and
+        ``plan`` (``SimPlan.to_dict()``) with ``--explain``.
+    text : str
+        A few readable lines; with ``--explain`` the plan table after them.
+    """
+    import numpy as np
+
+    totals = {k: float(np.sum(getattr(result, k), dtype=np.float64)) for k in ("expected", "background", "signal")}
+    peaks = _signal_peaks(result.signal)
+    data = {
+        "scene": {"kind": args.scene, "name": scene.name, **result.meta},
+        "sensor": sensor.name,
+        "shape": list(result.expected.shape),
+        "zones": None if zones is None else [list(z) for z in zones],
+        "fidelity": fidelity,
+        "dtype": str(result.expected.dtype),
+        "repeats": args.repeats,
+        "seed": args.seed,
+        "totals": totals,
+        "signal_peak_bin_per_zone": peaks,
+        "seconds": result.seconds,
+        "files": files,
+        "warnings": warned,
+    }
+    if args.explain:
+        data["plan"] = result.plan.to_dict()
+    share = 100 * totals["signal"] / totals["expected"] if totals["expected"] > 0 else 0.0
+    lines = [
+        f"simulated {scene.name} with {sensor.name} ({sensor.zones_rows}x{sensor.zones_cols} zones, "
+        f"{sensor.n_bins} bins of {sensor.bin_width_ps:g} ps), fidelity {fidelity}, in {result.seconds:.2f} s",
+        f"expected counts {totals['expected']:.4g}; object signal (minus the no-object capture) "
+        f"{totals['signal']:.4g} ({share:.2g} %)",
+        "signal peak bin per zone ('-': no signal):",
+        *_peak_lines(peaks, zones),
+        *(f"wrote {k}: {v}" for k, v in files.items()),
+    ]
+    if args.explain:
+        lines += ["", result.plan.explain()]
+    return data, "\n".join(lines)
+
+
+def _simulate_nlos(args, sensor) -> int:
+    """``simulate --scene denali|corner``: expected, background, signal, noisy captures, plot, summary."""
+    from nlosplan.reports import plot_simulation
+    from nlosplan.simulators import simulate
+
+    zones = None if args.only_zones is None else _parse_zones(args.only_zones)
+    scene = _nlos_scene(args)
+    fidelity = args.fidelity or "default"
+    _progress(args, f"simulating {scene.name} with {sensor.name} (fidelity {fidelity}) ...")
+    result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
+                                         fidelity=fidelity, zones=zones, **_given(args, dtype="dtype"))
+    files = _save_nlos(result, _npy_path(args.out))
+    if args.plot:
+        labels = None if zones is None else [f"zone ({r},{c})" for r, c in zones]
+        plot_simulation(result.expected, result.parts, result.signal, args.plot, bin_width_ps=sensor.bin_width_ps,
+                        start_offset_ps=sensor.start_offset_ps, title=_nlos_title(args, result.meta, sensor, fidelity),
+                        samples=None if result.counts is None else result.counts[0], zone_labels=labels)
+        files["plot"] = str(args.plot)
+    data, text = _nlos_summary(args, scene, sensor, result, zones, fidelity, files, warned)
+    _emit(args, data, text)
+    return 0
+
+
+def _simulate_wall(args, sensor) -> int:
+    """``simulate --scene wall``: the first-bounce wall capture (expected, noisy captures, plot)."""
     import numpy as np
 
     from nlosplan.reports import plot_zone_histograms
     from nlosplan.simulators import WallScene, simulate_wall
 
-    sensor = _sensor_from_args(args)
-    if args.samples < 1:
+    if args.samples is not None and args.samples < 1:
         raise UserError(f"--samples {args.samples} must be >= 1")
-    if args.repeats < 0:
-        raise UserError(f"--repeats {args.repeats} must be >= 0")
-    scene = WallScene(distance_m=args.distance, yaw_deg=args.yaw, pitch_deg=args.pitch,
-                      albedo=args.albedo, lights_on=args.lights == "on")
+    scene = WallScene(**_given(args, distance_m="distance", yaw_deg="yaw", pitch_deg="pitch", albedo="albedo"),
+                      lights_on=args.lights == "on")
+    fidelity = _given(args, n_sub="samples")
     t0 = time.perf_counter()
-    mean = simulate_wall(scene, sensor, n_sub=args.samples)
-    counts = simulate_wall(scene, sensor, n_sub=args.samples, rng=args.seed, repeats=args.repeats) if args.repeats else None
+    mean = simulate_wall(scene, sensor, **fidelity)
+    counts = simulate_wall(scene, sensor, **fidelity, rng=args.seed, repeats=args.repeats) if args.repeats else None
     seconds = time.perf_counter() - t0
-    out = Path(args.out)
+    out = _npy_path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.save(out, mean)
     files = {"expected": str(out)}
@@ -139,6 +349,17 @@ def _cmd_simulate(args) -> int:
             f"peak bin per zone:\n{peak_bins}\n" + "\n".join(f"wrote {k}: {v}" for k, v in files.items()))
     _emit(args, summary, text)
     return 0
+
+
+def _cmd_simulate(args) -> int:
+    """``nlosplan simulate``: check the options against the scene, build the sensor, run the scene."""
+    _check_scene_options(args)
+    if args.repeats < 0:
+        raise UserError(f"--repeats {args.repeats} must be >= 0")
+    sensor = _sensor_from_args(args)
+    if args.scene == "wall":
+        return _simulate_wall(args, sensor)
+    return _simulate_nlos(args, sensor)
 
 
 # ----------------------------------------------------------------- check
@@ -182,15 +403,119 @@ EXAMPLES = {
     "sensor list": "nlosplan sensor list",
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
     "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
-    "simulate": "nlosplan simulate --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 --out out/h.npy --plot out/h.png",
+    "simulate": (
+        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19.npy --plot out/a19.png",
+        "nlosplan simulate --scene corner --object-xy 0.45,0.30 --object A_8in --reflectance retroreflective "
+        "--zones 8x8 --explain",
+        "nlosplan simulate --scene wall --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 "
+        "--out out/h.npy --plot out/h.png",
+    ),
     "check": "nlosplan check --json",
     "bench histogram": "nlosplan bench histogram --json",
 }
 
+SIMULATE_DESCRIPTION = """\
+Simulate one capture and write its histograms and a plot of every zone.
 
-def _sub(subparsers, name: str, key: str, help_text: str) -> argparse.ArgumentParser:
-    return subparsers.add_parser(name, help=help_text, description=help_text, epilog=f"example:\n  {EXAMPLES[key]}",
+scenes:
+  denali  the DENALI rig (default): a TMF8828 facing the relay wall, a hidden
+          retroreflective object on the gantry (60 meshes, 100 positions)
+  corner  a parametric corner: LiDAR, relay wall and a hidden object beside it
+  wall    a plain wall in front of the sensor (first bounce only)
+
+outputs (denali, corner), for --out X.npy:
+  X.npy                    expected counts with the object, (rows, cols, bins),
+                           or (zones, bins) with --only-zones
+  X_background.npy         the same capture without the object (DENALI's NOOBJECT)
+  X_signal.npy             X minus background: the object's three-bounce return
+  X_counts.npy             noisy captures, int64, (repeats, ...) when --repeats > 0
+  X_background_counts.npy  noisy captures without the object
+The wall scene writes X.npy and X_counts.npy. Options of another scene are
+rejected."""
+
+
+def _examples(key: str) -> tuple[str, ...]:
+    """The example command lines of a (sub)command."""
+    value = EXAMPLES[key]
+    return value if isinstance(value, tuple) else (value,)
+
+
+def _sub(subparsers, name: str, key: str, help_text: str, description: str | None = None) -> argparse.ArgumentParser:
+    examples = _examples(key)
+    head = "example:" if len(examples) == 1 else "examples:"
+    return subparsers.add_parser(name, help=help_text, description=description or help_text,
+                                 epilog=head + "\n" + "\n".join(f"  {e}" for e in examples),
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _scene_options(group, scenes: tuple[str, ...], registry: dict):
+    """An ``add_argument`` for ``group`` whose options default to None and apply to ``scenes`` only."""
+
+    def add(flag: str, **kw):
+        action = group.add_argument(flag, default=None, **kw)
+        registry[action.dest] = (flag, scenes)
+        return action
+
+    return add
+
+
+def _add_simulate(sub) -> None:
+    """The ``simulate`` subcommand; scene-specific options are recorded in ``args.scene_options``."""
+    sim = _sub(sub, "simulate", "simulate", "simulate one capture (DENALI rig, corner or wall) and plot every zone",
+               description=SIMULATE_DESCRIPTION)
+    only: dict = {}
+    sim.add_argument("--scene", choices=SCENES, default="denali", help="scene (default: denali)")
+
+    add = _scene_options(sim.add_argument_group("DENALI rig (--scene denali)"), ("denali",), only)
+    add("--size", choices=["4in", "8in"], help="object size (default: 8in)")
+    add("--position", type=int, metavar="N", help="gantry position, 0 to 99 (default: 19)")
+    add("--mount", action="store_true", help="add the object mount (a Lambertian post) as a second object")
+
+    add = _scene_options(sim.add_argument_group("corner (--scene corner)"), ("corner",), only)
+    add("--wall-distance", type=float, metavar="M", help="LiDAR to relay wall, metres (default: 0.5)")
+    add("--object-xy", metavar="X,Y", help="object centre: lateral X (+ is the LiDAR's right) and distance Y in "
+                                            "front of the wall, metres (default: 0.45,0.30; --object-xy=-0.2,0.3 "
+                                            "for a negative X)")
+    add("--object-size", type=float, metavar="M", help="side of the 'patch' object, metres (default: 0.1)")
+    add("--object-yaw", type=float, metavar="DEG", help="object turn about the vertical, degrees (default: 0)")
+
+    add = _scene_options(sim.add_argument_group("hidden object and simulation (--scene denali or corner)"),
+                         NLOS_SCENES, only)
+    add("--object", help="denali: a DENALI object such as A, 7 or circle (default: A; a wrong name lists all 30); "
+                         "corner: patch (default), a DENALI name like A_8in, or an .obj file")
+    add("--reflectance", choices=["retroreflective", "lambertian"],
+        help="object reflectance (default: retroreflective for denali, lambertian for corner)")
+    add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: 0.5)")
+    add("--lobe-deg", type=float, metavar="DEG", help="retroreflective lobe FWHM, degrees (default: 2)")
+    add("--fidelity", metavar="LEVEL",
+        help="quadrature level: draft, low, default, high or reference (default: default)")
+    add("--only-zones", metavar="R,C;R,C",
+        help="compute only these zones, e.g. '1,1;0,2' (arrays become (zones, bins))")
+    add("--explain", action="store_true", help="print the plan: terms computed and left out, with reasons")
+    add("--dtype", choices=["float32", "float64"], help="floating-point precision (default: float32)")
+
+    add = _scene_options(sim.add_argument_group("wall (--scene wall)"), ("wall",), only)
+    add("--distance", type=float, metavar="M", help="wall distance, metres (default: 0.49, DENALI's)")
+    add("--yaw", type=float, metavar="DEG", help="wall tilt about the vertical axis, degrees (default: 0)")
+    add("--pitch", type=float, metavar="DEG", help="wall tilt about the horizontal axis, degrees (default: 0)")
+    add("--albedo", type=float, metavar="A", help="wall albedo, 0..1 (default: 0.8)")
+    add("--samples", type=int, metavar="N", help="sub-rays per zone axis, the wall's fidelity knob (default: 4)")
+
+    sen = sim.add_argument_group("sensor (all scenes)")
+    sen.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
+    sen.add_argument("--jitter-ps", type=float, help="override timing jitter FWHM, ps")
+    sen.add_argument("--bins", type=int, help="override number of bins")
+    sen.add_argument("--bin-width-ps", type=float, help="override bin width, ps")
+    sen.add_argument("--zones", help="override the zone grid, e.g. 8x8")
+
+    out = sim.add_argument_group("capture and output (all scenes)")
+    out.add_argument("--lights", choices=["on", "off"], default="off", help="room lights (default: off)")
+    out.add_argument("--repeats", type=int, default=1, help="noisy captures to draw (default: 1; 0 for none)")
+    out.add_argument("--seed", type=int, default=0, help="random seed of the noisy captures (default: 0)")
+    out.add_argument("--out", default="nlosplan-out/histogram.npy", help="expected counts .npy (default: %(default)s)")
+    out.add_argument("--plot", default="nlosplan-out/histogram.png", help="PNG plot of every zone ('' for none)")
+    out.add_argument("--json", action="store_true", help="machine-readable summary")
+    sim.set_defaults(func=_cmd_simulate, scene_options=only)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -198,7 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="nlosplan", formatter_class=argparse.RawDescriptionHelpFormatter,
                 description="Sensor design and experiment planning for non-line-of-sight imaging "
                             "with low-cost flash dToF LiDARs (TMF8828 class).",
-                epilog="examples:\n" + "\n".join(f"  {v}" for v in EXAMPLES.values()))
+                epilog="examples:\n" + "\n".join(f"  {e}" for key in EXAMPLES for e in _examples(key)))
     p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
@@ -220,25 +545,7 @@ def build_parser() -> argparse.ArgumentParser:
     s_fit.add_argument("--json", action="store_true", help="machine-readable output")
     s_fit.set_defaults(func=_cmd_sensor_fit)
 
-    sim = _sub(sub, "simulate", "simulate", "simulate the histograms of a sensor facing a wall (first bounce)")
-    sim.add_argument("--scene", choices=["wall"], default="wall", help="scene (default: wall)")
-    sim.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
-    sim.add_argument("--distance", type=float, default=0.49, help="wall distance in metres (default: %(default)s, DENALI's)")
-    sim.add_argument("--yaw", type=float, default=0.0, help="wall tilt about the vertical axis, degrees")
-    sim.add_argument("--pitch", type=float, default=0.0, help="wall tilt about the horizontal axis, degrees")
-    sim.add_argument("--albedo", type=float, default=0.8, help="wall albedo, 0..1 (default: %(default)s)")
-    sim.add_argument("--lights", choices=["on", "off"], default="off", help="ambient light (default: off)")
-    sim.add_argument("--jitter-ps", type=float, help="override timing jitter FWHM, ps")
-    sim.add_argument("--bins", type=int, help="override number of bins")
-    sim.add_argument("--bin-width-ps", type=float, help="override bin width, ps")
-    sim.add_argument("--zones", help="override zone grid, e.g. 8x8")
-    sim.add_argument("--samples", type=int, default=4, help="sub-rays per zone axis, the fidelity knob (default: 4)")
-    sim.add_argument("--repeats", type=int, default=1, help="noisy captures to draw (default: 1; 0 for none)")
-    sim.add_argument("--seed", type=int, default=0, help="random seed for the noisy captures")
-    sim.add_argument("--out", default="nlosplan-out/histogram.npy", help="expected histogram .npy, shape (rows, cols, bins)")
-    sim.add_argument("--plot", default="nlosplan-out/histogram.png", help="PNG plot of every zone ('' for none)")
-    sim.add_argument("--json", action="store_true", help="machine-readable summary")
-    sim.set_defaults(func=_cmd_simulate)
+    _add_simulate(sub)
 
     chk = _sub(sub, "check", "check", "run the stability catalog (stiff and extreme cases); exit 0 only if all pass")
     chk.add_argument("--json", action="store_true", help='print {"cases": [{"name", "passed", "detail"}...]}')

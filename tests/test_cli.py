@@ -22,7 +22,7 @@ def run(capsys, *argv):
         (["simulate", "--bins", "0"], "n_bins=0"),
         (["simulate", "--zones", "3by3"], "--zones"),
         (["simulate", "--distance", "abc"], "invalid float value: 'abc'"),
-        (["simulate", "--albedo", "2"], "albedo"),
+        (["simulate", "--scene", "wall", "--albedo", "2"], "albedo"),
         (["sensor", "show", "/nonexistent/sensor.toml"], "cannot read sensor file"),
         (["bogus-command"], "invalid choice"),
     ],
@@ -66,8 +66,8 @@ def test_sensor_list_json_names_all_presets(capsys):
 
 def test_simulate_writes_npy_and_png(capsys, tmp_path):
     out_npy, out_png = tmp_path / "h.npy", tmp_path / "h.png"
-    code, out, _ = run(capsys, "simulate", "--distance", "0.3", "--zones", "4x4", "--out", str(out_npy),
-                       "--plot", str(out_png), "--json", "--repeats", "2", "--seed", "3")
+    code, out, _ = run(capsys, "simulate", "--scene", "wall", "--distance", "0.3", "--zones", "4x4",
+                       "--out", str(out_npy), "--plot", str(out_png), "--json", "--repeats", "2", "--seed", "3")
     assert code == 0
     summary = json.loads(out)
     mean = np.load(out_npy)
@@ -84,7 +84,7 @@ def test_help_has_examples(capsys):
         main(["simulate", "--help"])
     assert exc.value.code == 0
     out = capsys.readouterr().out
-    assert "example:" in out and "nlosplan simulate --sensor" in out
+    assert "examples:" in out and "nlosplan simulate --scene wall --sensor" in out
 
 
 def test_check_json_passes_at_least_20_cases(capsys):
