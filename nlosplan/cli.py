@@ -95,7 +95,13 @@ def _sensor_from_args(args):
         except ValueError:
             raise UserError(f"--zones {args.zones!r} must look like 3x3 or 8x8") from None
         changes.update(zones_rows=r, zones_cols=c)
-    return s.replace(**changes) if changes else s
+    if not changes:
+        return s
+    shown = {"jitter_fwhm_ps": "jitter {} ps", "n_bins": "{} bins", "bin_width_ps": "{} ps bins"}
+    parts = [shown[k].format(v) for k, v in changes.items() if k in shown]
+    if "zones_rows" in changes:
+        parts.append(f"{changes['zones_rows']}x{changes['zones_cols']} zones")
+    return s.replace(name=f"{s.name} ({', '.join(parts)})", **changes)
 
 
 def _check_scene_options(args) -> None:
@@ -579,6 +585,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("nlosplan: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into e.g. `head`, which closed early
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -30,7 +30,8 @@ from nlosplan.sensor_models.pipeline import pulse_boxes
 from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps
 from nlosplan.simulators.fast.fidelity import Fidelity, resolve_fidelity
 from nlosplan.simulators.fast.geometry import direct_returns, trace
-from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, plan_object
+from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, _zone_names, plan_object
+from nlosplan.simulators.meshes import _fine_cells
 from nlosplan.simulators.scene import Scene
 
 #: Sensor fields a batch may vary (traced); every other field must be equal.
@@ -145,12 +146,15 @@ def _resolve_zones(sensor: SensorConfig, zones) -> tuple[np.ndarray, bool]:
         except (TypeError, ValueError):
             raise UserError(f"zone {z!r} must be a (row, col) pair") from None
         if not (0 <= r < sensor.zones_rows and 0 <= c < sensor.zones_cols):
-            raise UserError(f"zone ({r},{c}) is outside the {sensor.zones_rows}x{sensor.zones_cols} grid")
+            raise UserError(f"zone ({r},{c}) is outside the {sensor.zones_rows}x{sensor.zones_cols} grid; allowed: "
+                            f"rows 0..{sensor.zones_rows - 1}, columns 0..{sensor.zones_cols - 1}")
         out.append(r * sensor.zones_cols + c)
     if not out:
         raise UserError("no zones requested; give at least one (row, col)")
-    if len(set(out)) != len(out):
-        raise UserError("a zone is requested twice")
+    twice = sorted({z for z in out if out.count(z) > 1})
+    if twice:
+        z = twice[0]
+        raise UserError(f"zone ({z // sensor.zones_cols},{z % sensor.zones_cols}) is requested twice")
     return np.array(out), False
 
 
@@ -183,6 +187,20 @@ def _check_sensors(sensors: list[SensorConfig]) -> None:
         if bad:
             raise UserError(f"sensors in one batch may differ only in {', '.join(DYNAMIC_SENSOR_FIELDS)}; "
                             f"these differ: {', '.join(bad)}")
+
+
+def _dense_world_points(objs: list) -> np.ndarray:
+    """Vertices and centroids of small pieces (edges <= 1/16 of the object size) of every pose, (P, 3)."""
+    out, seen = [], {}
+    for obj in objs:
+        mesh = obj.mesh
+        if id(mesh) not in seen:
+            diag = float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+            cen, _, _ = _fine_cells(mesh, mesh.face_areas > 0, diag / 16, np.inf, 20_000)
+            seen[id(mesh)] = np.concatenate([mesh.vertices, cen])
+        r, t = obj.to_world[:3, :3], obj.to_world[:3, 3]
+        out.append(seen[id(mesh)] @ r.T + t)
+    return np.concatenate(out)
 
 
 def _direct_view_zones(scene: Scene, sensor: SensorConfig, points: np.ndarray) -> list[int]:
@@ -285,11 +303,10 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         if plan is not None:
             obj_plans.append(plan)
             obj_index.append(k)
-        pts = np.concatenate([o.world_vertices() for o in (sc.objects[k] for sc in scenes)])
-        seen = _direct_view_zones(base, sensor, pts)
+        seen = _direct_view_zones(base, sensor, _dense_world_points([sc.objects[k] for sc in scenes]))
         if seen:
-            names = ", ".join(f"({z // sensor.zones_cols},{z % sensor.zones_cols})" for z in seen[:6])
-            warnings.append(f"object {obj.name!r} is inside the LiDAR's direct field of view (zones {names}): this is "
+            warnings.append(f"object {obj.name!r} is inside the LiDAR's direct field of view (zones "
+                            f"{_zone_names(seen, sensor)}): this is "
                             "not an NLOS capture; only its three-bounce light is simulated")
     if not base.objects:
         terms.append(Term(False, "hidden object", "none in the scene (background, like DENALI's NOOBJECT capture)"))

@@ -6,6 +6,7 @@ for a batch of poses, sizes its time axes, and says what it left out.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ from nlosplan.sensor_models.transient import TimeGrid
 from nlosplan.sensor_models.zones import zone_edges_tan
 
 #: Node axes are rounded up to a multiple of this, so nearby scenes share compiled code.
-BUCKET = 32
+BUCKET = 64
 #: Surface points are padded (with zero area) to a multiple of this, for shared compiled code.
 SAMPLE_BUCKET = 64
 #: Object points closer to a wall cell than this many cell sizes use the exact polygon coupling
@@ -387,8 +388,43 @@ def plan_object(
     elif n_vis < int((obj.mesh.face_areas > 0).sum()):
         notes.append((False, f"{label}: back faces",
                       f"{int((obj.mesh.face_areas > 0).sum()) - n_vis} faces cannot see the wall in any pose"))
+    static = _pad_cells(static, arrays)
     return ObjectPlan(static=static, arrays=arrays, zone_rows=zone_rows, paths=paths, samples=samples,
                       mesh_index=mesh_index), notes
+
+
+#: Per-cell arrays of each leg; ``c{leg}t`` is (3, N), the others have the cell axis first.
+_LEG_KEYS = {"1": ("k1", "a1", "r1", "thr1", "l1", "recv", "uv", "jac", "frac"), "2": ("k2", "a2", "r2", "thr2", "l2", "row2")}
+#: Wall-cell counts are padded to a multiple of this, near blocks to a multiple of NEAR_BUCKET.
+CELL_BUCKET = 32
+NEAR_BUCKET = 16
+
+
+def _pad_cells(static: ObjectStatic, arrays: dict) -> ObjectStatic:
+    """Pad each leg's cells with weightless copies, and the near blocks, to bucket sizes.
+
+    Scenes of a sweep (positions, objects) then share array shapes, so JAX
+    reuses one compiled function; the padding contributes exactly nothing
+    (zero radiance ``l``, zero receive factor, zero lobe share, threshold 0).
+    """
+    near = {}
+    for leg in ("1", "2"):
+        if f"c{leg}t" not in arrays:
+            near[leg] = 0
+            continue
+        n = arrays[f"c{leg}t"].shape[1]
+        size = max(CELL_BUCKET, -(-n // CELL_BUCKET) * CELL_BUCKET)
+        pad = size - n
+        arrays[f"c{leg}t"] = np.concatenate([arrays[f"c{leg}t"], np.repeat(arrays[f"c{leg}t"][:, -1:], pad, 1)], 1)
+        for key in _LEG_KEYS[leg]:
+            if key in arrays:
+                a = arrays[key]
+                fill = np.zeros((pad,) + a.shape[1:], a.dtype) if key in ("l1", "l2", "recv", "frac", "thr1", "thr2") \
+                    else np.repeat(a[-1:], pad, 0)
+                arrays[key] = np.concatenate([a, fill])
+        k = static.near1 if leg == "1" else static.near2
+        near[leg] = min(size, -(-k // NEAR_BUCKET) * NEAR_BUCKET)
+    return dataclasses.replace(static, near1=near["1"], near2=near["2"])
 
 
 def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:

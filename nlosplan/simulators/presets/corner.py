@@ -164,6 +164,8 @@ def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: 
         planes = (Rect.facing((0.0, -FLOOR_SIZE / 2, fz), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0), width=FLOOR_SIZE,
                               height=FLOOR_SIZE, albedo=FLOOR_ALBEDO, name="floor"),)
 
-    meta = {"preset": "corner", "object": label, "object_xy": [x, y], "wall_distance": d, "reflectance": reflectance}
+    meta = {"preset": "corner", "object": label, "object_xy": [x, y], "wall_distance": d, "reflectance": reflectance,
+            "albedo": hidden.albedo, "lobe_fwhm_deg": hidden.lobe_fwhm_deg, "object_yaw_deg": float(yaw_deg),
+            "object_size": float(object_size), "lights": "on" if lights_on else "off"}
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=(hidden,), lights_on=bool(lights_on),
                  name=f"corner {label} at ({x:g}, {y:g}) m", meta=meta)

@@ -318,6 +318,8 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": class_group(name),
         "lights": "on" if on else "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": reflectance,
+        "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg, "mount": bool(mount),
+        "wall_albedo": wall.albedo, "tables": bool(tables),
     }
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=tuple(objects), lights_on=on,
                  name=f"denali {name}_{size} p{p:02d} lights {meta['lights']}", meta=meta)
