@@ -97,6 +97,8 @@ class SimPlan:
         mesh (points, normals, areas; object frame, one padded size).
     object_mesh_index : tuple of ndarray
         Per computed object term, which quadrature each scene uses, shape (N,).
+    object_near_index : tuple of dict
+        Per computed object term and leg, each scene's near-wall cell indices.
     """
 
     static: PlanStatic
@@ -111,6 +113,7 @@ class SimPlan:
     object_index: tuple = ()
     object_samples: tuple = ()
     object_mesh_index: tuple = ()
+    object_near_index: tuple = ()
 
     def explain(self) -> str:
         """Text table of computed and left-out terms with the reason for each."""
@@ -343,5 +346,6 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     return SimPlan(static=static, arrays=arrays, zones=zones_out, full_grid=full_grid, terms=tuple(terms),
                    warnings=tuple(warnings), sensor=sensor, fidelity=fid, paths=paths, object_index=tuple(obj_index),
                    object_samples=tuple(o.samples for o in obj_plans),
-                   object_mesh_index=tuple(o.mesh_index for o in obj_plans))
+                   object_mesh_index=tuple(o.mesh_index for o in obj_plans),
+                   object_near_index=tuple(o.near_index for o in obj_plans))
 

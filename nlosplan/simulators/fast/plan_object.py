@@ -71,6 +71,9 @@ class ObjectPlan:
         padded to one size ``M``); they are dynamic scene parameters.
     mesh_index : ndarray of int, shape (N,)
         Which entry of ``samples`` each scene of the batch uses.
+    near_index : dict of leg -> list of ndarray of int
+        Per scene, the wall cells of each leg that need the exact coupling
+        (padded to the static block size with an out-of-range index).
     """
 
     static: ObjectStatic
@@ -79,6 +82,7 @@ class ObjectPlan:
     paths: int
     samples: list
     mesh_index: np.ndarray
+    near_index: dict
 
 
 def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
@@ -309,33 +313,28 @@ def plan_object(
         keep = det_rows >= 0
         det, det_rows, t2_lo, t2_hi = det.select(keep), det_rows[keep], t2_lo[keep], t2_hi[keep]
 
-    # near field: cells an object point can come within NEAR_CELLS cell sizes of use the exact form
-    # factor; they are moved to the front so the transport handles them as one static block
+    # near field: per scene, the cells its object can come within NEAR_CELLS cell sizes of use the exact
+    # form factor; their indices are dynamic scene parameters (padded), the block size is static
+    near_index: dict[str, list[np.ndarray]] = {}
     n_near = {"1": 0, "2": 0}
     for leg in ("1",) if retro else ("1", "2"):
         cells = flash if leg == "1" else det
         thr = NEAR_CELLS * np.sqrt(cells.area)
-        dmin = (np.linalg.norm(cells.centers[:, None] - centers[None], axis=-1) - radii[None]).min(axis=1)
-        near_mask = cells.has_polygon & (dmin < thr)
-        perm = np.concatenate([np.flatnonzero(near_mask), np.flatnonzero(~near_mask)])
-        n_near[leg] = int(near_mask.sum())
-        if leg == "1":
-            flash = flash.select(perm)
-            jac = jac[perm] if retro else None
-        else:
-            det, det_rows = det.select(perm), det_rows[perm]
-        cells = flash if leg == "1" else det
+        dist = np.linalg.norm(cells.centers[:, None] - centers[None], axis=-1) - radii[None]  # (N, scenes)
+        near_index[leg] = [np.flatnonzero(cells.has_polygon & (dist[:, j] < thr)) for j in range(len(obj_list))]
+        n_near[leg] = max(len(i) for i in near_index[leg])
         arrays.update({f"c{leg}t": cells.centers.T.copy(), f"k{leg}": cells.corners, f"a{leg}": cells.area,
-                       f"r{leg}": cells.r, f"thr{leg}": thr[perm]})
+                       f"r{leg}": cells.r, f"thr{leg}": thr})
     near = n_near["1"] + n_near["2"] > 0
     h_min = min(float(scene.wall.signed_distance(o.world_vertices()).min()) for o in obj_list)
     arrays["n_w"] = scene.wall.normal
     arrays["w0"] = scene.wall.center
+    arrays["wall_corners"] = scene.wall.corners()
     notes.append((near, f"{label}: near-wall quadrature",
-                  (f"object {h_min * 1000:.1f} mm from the wall: {n_near['1'] + n_near['2']} wall cells it can come "
-                   f"within {NEAR_CELLS:g} cell sizes of use the exact polygon form factor" if near else
-                   f"object >= {h_min * 100:.1f} cm from the wall, beyond {NEAR_CELLS:g} cell sizes of every cell: "
-                   "midpoint kernel within 0.5 %")))
+                  (f"object {h_min * 1000:.1f} mm from the wall: up to {n_near['1'] + n_near['2']} wall cells per "
+                   f"scene it can come within {NEAR_CELLS:g} cell sizes of use the exact polygon form factor" if near
+                   else f"object >= {h_min * 100:.1f} cm from the wall, beyond {NEAR_CELLS:g} cell sizes of every "
+                   "cell: midpoint kernel within 0.5 %")))
     # radiance of the wall cell per unit flash power: (albedo / pi) I dOmega / A
     arrays["l1"] = scene.wall.albedo / math.pi * flash.weight / flash.area
     delta = sensor.bin_width_ps / grid.oversample
@@ -362,7 +361,7 @@ def plan_object(
                 if int(z) in local_row:
                     onehot[i, local_row[int(z)]] = 1.0
             arrays["frac"] = onehot
-        static = ObjectStatic("retroreflective", n_near["1"], 0, lobe, len(obj_zones), n_r=n_r)
+        static = ObjectStatic("retroreflective", 0, 0, lobe, len(obj_zones), n_r=n_r)
         paths = m * n1
         how = (f"retroreflective ({obj.lobe_fwhm_deg:g} deg lobe), {m} surface samples on {n_vis} of {n_faces} faces"
                f" x {n1} lit wall cells = {paths:,} paths")
@@ -378,7 +377,7 @@ def plan_object(
         arrays.update(row2=det_rows, l2=scene.wall.albedo / math.pi * det.weight / det.area,
                       j1=np.array(j1), j2=np.array(j2), shift=np.array(j1 + j2 - grid.first_bin * grid.oversample))
         fft_len = n1 + n2
-        static = ObjectStatic("lambertian", n_near["1"], n_near["2"], False, len(obj_zones), n1=n1, n2=n2, fft_len=fft_len)
+        static = ObjectStatic("lambertian", 0, 0, False, len(obj_zones), n1=n1, n2=n2, fft_len=fft_len)
         paths = m * (len(flash) + len(det))
         how = (f"Lambertian, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
                f"wall cells, detection leg {m} x {len(det)} zone cells, legs convolved in time")
@@ -388,9 +387,9 @@ def plan_object(
     elif n_vis < int((obj.mesh.face_areas > 0).sum()):
         notes.append((False, f"{label}: back faces",
                       f"{int((obj.mesh.face_areas > 0).sum()) - n_vis} faces cannot see the wall in any pose"))
-    static = _pad_cells(static, arrays)
+    static, near_index = _pad_cells(static, arrays, near_index)
     return ObjectPlan(static=static, arrays=arrays, zone_rows=zone_rows, paths=paths, samples=samples,
-                      mesh_index=mesh_index), notes
+                      mesh_index=mesh_index, near_index=near_index), notes
 
 
 #: Per-cell arrays of each leg; ``c{leg}t`` is (3, N), the others have the cell axis first.
@@ -400,14 +399,15 @@ CELL_BUCKET = 32
 NEAR_BUCKET = 16
 
 
-def _pad_cells(static: ObjectStatic, arrays: dict) -> ObjectStatic:
+def _pad_cells(static: ObjectStatic, arrays: dict, near_index: dict) -> tuple[ObjectStatic, dict]:
     """Pad each leg's cells with weightless copies, and the near blocks, to bucket sizes.
 
     Scenes of a sweep (positions, objects) then share array shapes, so JAX
     reuses one compiled function; the padding contributes exactly nothing
     (zero radiance ``l``, zero receive factor, zero lobe share, threshold 0).
+    Near-cell index lists are padded with the out-of-range index ``N``.
     """
-    near = {}
+    near, padded = {}, {}
     for leg in ("1", "2"):
         if f"c{leg}t" not in arrays:
             near[leg] = 0
@@ -422,9 +422,11 @@ def _pad_cells(static: ObjectStatic, arrays: dict) -> ObjectStatic:
                 fill = np.zeros((pad,) + a.shape[1:], a.dtype) if key in ("l1", "l2", "recv", "frac", "thr1", "thr2") \
                     else np.repeat(a[-1:], pad, 0)
                 arrays[key] = np.concatenate([a, fill])
-        k = static.near1 if leg == "1" else static.near2
-        near[leg] = min(size, -(-k // NEAR_BUCKET) * NEAR_BUCKET)
-    return dataclasses.replace(static, near1=near["1"], near2=near["2"])
+        k = max(len(i) for i in near_index[leg])
+        near[leg] = 0 if k == 0 else min(size, -(-k // NEAR_BUCKET) * NEAR_BUCKET)
+        padded[leg] = [np.concatenate([i, np.full(near[leg] - len(i), size)]).astype(np.int64)
+                       for i in near_index[leg]]
+    return dataclasses.replace(static, near1=near["1"], near2=near["2"]), padded
 
 
 def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:

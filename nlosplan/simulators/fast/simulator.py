@@ -112,20 +112,25 @@ class FastSimulator:
         self.plan: SimPlan = build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune)
         self.chunk = max(1, int(chunk))
         self._arrays = _to_jax(self.plan.arrays, self.dtype)
+        self._params = None
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
         """Batched dynamic parameters ``(scene_p, sensor_p)`` with leading axes (N,) and (S,).
 
         ``scene_p["objects"][k]`` holds the pose ``to_world`` (4, 4), the
-        ``albedo`` and the object's surface quadrature (``points``,
-        ``normals``, ``areas``, object frame) of every scene.
+        ``albedo``, the object's surface quadrature (``points``, ``normals``,
+        ``areas``, object frame) and the wall cells needing the exact
+        near-wall coupling (``near1``, ``near2``) of every scene.
         """
-        per_scene = [scene_params(s, self.plan.object_index) for s in self.scenes]
-        for k, (samples, index) in enumerate(zip(self.plan.object_samples, self.plan.object_mesh_index)):
-            for sp, i in zip(per_scene, index):
+        plan = self.plan
+        per_scene = [scene_params(s, plan.object_index) for s in self.scenes]
+        for k, (samples, index) in enumerate(zip(plan.object_samples, plan.object_mesh_index)):
+            near = plan.object_near_index[k]
+            for j, (sp, i) in enumerate(zip(per_scene, index)):
                 pts, nrm, area = samples[i]
-                sp["objects"][k].update(points=pts, normals=nrm, areas=area)
+                sp["objects"][k].update(points=pts, normals=nrm, areas=area,
+                                        **{f"near{leg}": idx[j] for leg, idx in near.items()})
         return _stack(per_scene), _stack([sensor_params(s) for s in self.sensors])
 
     def function(self, parts: bool = False):
@@ -142,9 +147,14 @@ class FastSimulator:
         return self.plan.explain()
 
     # ------------------------------------------------------------ evaluation
+    def _jax_params(self):
+        if self._params is None:  # built once: the scenes and sensors are fixed
+            scene_p, sensor_p = self.params()
+            self._params = _to_jax(scene_p, self.dtype), _to_jax(sensor_p, self.dtype)
+        return self._params
+
     def _run(self, parts: bool):
-        scene_p, sensor_p = self.params()
-        scene_p, sensor_p = _to_jax(scene_p, self.dtype), _to_jax(sensor_p, self.dtype)
+        scene_p, sensor_p = self._jax_params()
         n = len(self.scenes)
         outs = []
         for start in range(0, n, self.chunk):

@@ -52,24 +52,31 @@ def _pose(p):
     return p["points"] @ r.T + t, p["normals"] @ r.T
 
 
-def _coupling(a, leg: str, x, n, n_near: int):
+def _coupling(a, p, leg: str, x, n, n_near: int):
     """Coupling (M, N) and distance (M, N) between samples and the wall cells of a leg.
 
-    The first ``n_near`` cells (static: those an object point can come within
-    a few cell sizes of) use the exact polygon form factor where a point is
-    closer than their threshold ``thr``.
+    The scene's near-wall cells ``p["near{leg}"]`` (a padded block of
+    ``n_near`` indices) use the exact polygon form factor where a sample is
+    closer than the cell's threshold ``thr``; padding indices are out of
+    range and dropped.
     """
     height = (x - a["w0"]) @ a["n_w"]
     c, dist = far_coupling(a[f"c{leg}t"], a[f"a{leg}"], x, n, height)
     if n_near:
-        exact = polygon_coupling(x, n, a[f"k{leg}"][:n_near])
-        use = dist[:, :n_near] < a[f"thr{leg}"][None, :n_near]
-        c = jnp.concatenate([jnp.where(use, exact, c[:, :n_near]), c[:, n_near:]], axis=1)
+        idx = p[f"near{leg}"]
+        valid = idx < c.shape[1]
+        exact = polygon_coupling(x, n, jnp.take(a[f"k{leg}"], idx, axis=0, mode="clip"))
+        use = (jnp.take(dist, idx, axis=1, mode="clip") < jnp.take(a[f"thr{leg}"], idx, mode="clip")[None]) & valid
+        c = c.at[:, idx].set(jnp.where(use, exact, jnp.take(c, idx, axis=1, mode="clip")), mode="drop")
     return c, dist
 
 
 def _lobe_fractions(a, x, w, sigma):
-    """Share of each cell's retro lobe landing in each object zone, shape (N1, Zobj)."""
+    """Share of each cell's retro lobe landing in each object zone, shape (N1, Zobj).
+
+    The lobe's spread is evaluated at the distance from each cell to the
+    object's centroid weighted by ``w`` (the area of samples that see the wall).
+    """
     centroid = (x * w[:, None]).sum(0) / jnp.maximum(w.sum(), 1e-30)
     e = a["c1t"].T - centroid
     dbar = jnp.sqrt(jnp.sum(e * e, -1))
@@ -88,14 +95,17 @@ def _lobe_fractions(a, x, w, sigma):
 
 def _retro(st, a, p, grid, bw, t0):
     x, n = _pose(p)
-    c, dist = _coupling(a, "1", x, n, st.near1)
+    c, dist = _coupling(a, p, "1", x, n, st.near1)
     w = a["l1"][None] * c * (p["albedo"] * p["areas"][:, None]) * a["recv"][None]
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
     n1 = a["a1"].shape[0]
     rows = jnp.broadcast_to(jnp.arange(n1)[None], w.shape)
     per_cell = deposit_at(pos, w, rows, n1, st.n_r)  # (N1, n_r)
-    frac = _lobe_fractions(a, x, p["areas"], a["lobe_sigma"]) if st.lobe else a["frac"]
+    # lobe spread at the centroid of the samples that see the wall (independent of which cells are kept)
+    sees = jnp.max((a["wall_corners"][None] - x[:, None]) @ n[:, :, None], axis=(1, 2)) > 0
+    seen_area = p["areas"] * (sees & ((x - a["w0"]) @ a["n_w"] > 0))
+    frac = _lobe_fractions(a, x, seen_area, a["lobe_sigma"]) if st.lobe else a["frac"]
     return frac.T @ per_cell, a["k_r0"]
 
 
@@ -103,11 +113,11 @@ def _lambertian(st, a, p, grid, bw, t0):
     x, n = _pose(p)
     m = x.shape[0]
     delta = bw / grid.oversample
-    c1, d1 = _coupling(a, "1", x, n, st.near1)
+    c1, d1 = _coupling(a, p, "1", x, n, st.near1)
     t1 = (a["r1"][None] + d1) / C_M_PER_PS
     rows1 = jnp.broadcast_to(jnp.arange(m)[:, None], c1.shape)
     leg1 = deposit_at((t1 - t0) / delta - 0.5 - a["j1"], a["l1"][None] * c1, rows1, m, st.n1)
-    c2, d2 = _coupling(a, "2", x, n, st.near2)
+    c2, d2 = _coupling(a, p, "2", x, n, st.near2)
     w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * p["areas"][:, None]
     t2 = (d2 + a["r2"][None]) / C_M_PER_PS
     rows2 = jnp.arange(m)[:, None] * st.n_rows + a["row2"][None]
