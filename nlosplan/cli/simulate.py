@@ -1,80 +1,19 @@
-"""The ``nlosplan`` command: argument parsing and calls into the rooms.
-
-User errors (:class:`nlosplan.errors.UserError`, bad arguments) print one
-line on stderr and exit with code 2; no traceback.
-"""
+"""``nlosplan simulate``: one capture of the DENALI rig, a corner or a wall, and a plot of every zone."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
 from pathlib import Path
 
-from nlosplan import __version__
+from nlosplan.cli.common import emit, note, sub_parser
 from nlosplan.errors import UserError
 
-EXIT_USAGE = 2
-
-
-class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line and exit 2."""
-
-    def error(self, message: str):  # noqa: D401 - argparse API
-        raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")
-
-
-def _emit(args, data, text: str) -> None:
-    if getattr(args, "json", False):
-        print(json.dumps(data, indent=2, default=float))
-    else:
-        print(text)
-
-
-# ----------------------------------------------------------------- sensor
-def _cmd_sensor_list(args) -> int:
-    from nlosplan.reports.tables import format_table
-    from nlosplan.sensor_models import PRESET_NAMES, preset
-
-    rows = []
-    for name in PRESET_NAMES:
-        s = preset(name)
-        rows.append(dict(name=name, zones=f"{s.zones_rows}x{s.zones_cols}", bins=s.n_bins,
-                         bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
-                         pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
-                         iterations=s.iterations))
-    _emit(args, {"presets": rows}, format_table(rows))
-    return 0
-
-
-def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import resolve_sensor
-
-    s = resolve_sensor(args.name)
-    if args.toml:
-        print(s.to_toml())
-    elif args.json:
-        print(s.to_json())
-    else:
-        for k, v in s.to_dict().items():
-            if k == "pulse_shape" and v is not None:
-                v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
-            print(f"{k:>22} = {v}")
-    return 0
-
-
-def _cmd_sensor_fit(args) -> int:
-    from nlosplan.sensor_models.tmf882x_report import fit_report
-
-    report = fit_report(args.path)
-    _emit(args, report, report["summary"])
-    return 0
-
-
-# ----------------------------------------------------------------- simulate
 SCENES = ("denali", "corner", "wall")
+
+
 NLOS_SCENES = ("denali", "corner")
 
 
@@ -144,12 +83,6 @@ def _npy_path(text: str) -> Path:
     """``--out`` as the path ``numpy.save`` will write (it appends ``.npy`` when missing)."""
     out = Path(text)
     return out if out.suffix == ".npy" else out.with_name(out.name + ".npy")
-
-
-def _progress(args, message: str) -> None:
-    """One line on stderr before long work, only for a person watching a terminal (not with --json)."""
-    if not args.json and sys.stderr.isatty():
-        print(message, file=sys.stderr, flush=True)
 
 
 def _with_warning_lines(func, *a, **kw):
@@ -295,7 +228,7 @@ def _simulate_nlos(args, sensor) -> int:
     zones = None if args.only_zones is None else _parse_zones(args.only_zones)
     scene = _nlos_scene(args)
     fidelity = args.fidelity or "default"
-    _progress(args, f"simulating {scene.name} with {sensor.name} (fidelity {fidelity}) ...")
+    note(args, f"simulating {scene.name} with {sensor.name} (fidelity {fidelity}) ...")
     result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
                                          fidelity=fidelity, zones=zones, **_given(args, dtype="dtype"))
     files = _save_nlos(result, _npy_path(args.out))
@@ -306,7 +239,7 @@ def _simulate_nlos(args, sensor) -> int:
                         samples=None if result.counts is None else result.counts[0], zone_labels=labels)
         files["plot"] = str(args.plot)
     data, text = _nlos_summary(args, scene, sensor, result, zones, fidelity, files, warned)
-    _emit(args, data, text)
+    emit(args, data, text)
     return 0
 
 
@@ -353,7 +286,7 @@ def _simulate_wall(args, sensor) -> int:
     text = (f"simulated {sensor.name} ({sensor.zones_rows}x{sensor.zones_cols} zones, {sensor.n_bins} bins) "
             f"facing a wall at {scene.distance_m:g} m in {seconds:.2f} s\n"
             f"peak bin per zone:\n{peak_bins}\n" + "\n".join(f"wrote {k}: {v}" for k, v in files.items()))
-    _emit(args, summary, text)
+    emit(args, summary, text)
     return 0
 
 
@@ -367,58 +300,6 @@ def _cmd_simulate(args) -> int:
         return _simulate_wall(args, sensor)
     return _simulate_nlos(args, sensor)
 
-
-# ----------------------------------------------------------------- check
-def _cmd_check(args) -> int:
-    from nlosplan.reports.tables import format_table
-    from nlosplan.stability import all_cases, run_cases
-
-    cases = all_cases()
-    progress = None
-    if not args.json and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(cases), desc="stability cases", unit="case", file=sys.stderr, leave=False)
-        progress = lambda _r: bar.update(1)  # noqa: E731
-    results = run_cases(cases, progress)
-    ok = all(r.passed for r in results)
-    data = {"passed": ok, "cases": [{"name": r.name, "passed": r.passed, "requirement": r.requirement,
-                                     "detail": r.detail, "seconds": round(r.seconds, 3)} for r in results]}
-    rows = [{"case": r.name, "must hold": r.requirement, "measured": r.detail,
-             "result": "pass" if r.passed else "FAIL"} for r in results]
-    n_pass = sum(r.passed for r in results)
-    text = format_table(rows) + f"\n\n{n_pass} of {len(results)} cases passed"
-    _emit(args, data, text)
-    return 0 if ok else 1
-
-
-# ----------------------------------------------------------------- bench
-def _cmd_bench_histogram(args) -> int:
-    from nlosplan.reports.tables import format_table
-    from nlosplan.sensor_models.bench import bench_histogram
-
-    res = bench_histogram(batch=args.batch, min_seconds=args.seconds, arrivals_per_zone=args.arrivals)
-    cols = ["zones", "dtype", "mode", "frames_per_second", "zone_histograms_per_second", "compile_seconds", "speedup_vs_numpy"]
-    _emit(args, res, format_table(res["rows"], cols) + f"\n({res['config']['terms']}; "
-          f"{res['config']['arrivals_per_zone']} arrivals per zone; devices {res['config']['jax_devices']})")
-    return 0
-
-
-# ----------------------------------------------------------------- parser
-EXAMPLES = {
-    "sensor list": "nlosplan sensor list",
-    "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
-    "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
-    "simulate": (
-        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19.npy --plot out/a19.png",
-        "nlosplan simulate --scene corner --object-xy 0.45,0.30 --object A_8in --reflectance retroreflective "
-        "--zones 8x8 --explain",
-        "nlosplan simulate --scene wall --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 "
-        "--out out/h.npy --plot out/h.png",
-    ),
-    "check": "nlosplan check --json",
-    "bench histogram": "nlosplan bench histogram --json",
-}
 
 SIMULATE_DESCRIPTION = """\
 Simulate one capture and write its histograms and a plot of every zone.
@@ -440,20 +321,6 @@ The wall scene writes X.npy and X_counts.npy. Options of another scene are
 rejected."""
 
 
-def _examples(key: str) -> tuple[str, ...]:
-    """The example command lines of a (sub)command."""
-    value = EXAMPLES[key]
-    return value if isinstance(value, tuple) else (value,)
-
-
-def _sub(subparsers, name: str, key: str, help_text: str, description: str | None = None) -> argparse.ArgumentParser:
-    examples = _examples(key)
-    head = "example:" if len(examples) == 1 else "examples:"
-    return subparsers.add_parser(name, help=help_text, description=description or help_text,
-                                 epilog=head + "\n" + "\n".join(f"  {e}" for e in examples),
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-
-
 def _scene_options(group, scenes: tuple[str, ...], registry: dict):
     """An ``add_argument`` for ``group`` whose options default to None and apply to ``scenes`` only."""
 
@@ -465,9 +332,9 @@ def _scene_options(group, scenes: tuple[str, ...], registry: dict):
     return add
 
 
-def _add_simulate(sub) -> None:
+def add(sub) -> None:
     """The ``simulate`` subcommand; scene-specific options are recorded in ``args.scene_options``."""
-    sim = _sub(sub, "simulate", "simulate", "simulate one capture (DENALI rig, corner or wall) and plot every zone",
+    sim = sub_parser(sub, "simulate", "simulate", "simulate one capture (DENALI rig, corner or wall) and plot every zone",
                description=SIMULATE_DESCRIPTION)
     only: dict = {}
     sim.add_argument("--scene", choices=SCENES, default="denali", help="scene (default: denali)")
@@ -523,74 +390,3 @@ def _add_simulate(sub) -> None:
     out.add_argument("--json", action="store_true", help="machine-readable summary")
     sim.set_defaults(func=_cmd_simulate, scene_options=only)
 
-
-def build_parser() -> argparse.ArgumentParser:
-    """The full ``nlosplan`` argument parser."""
-    p = _Parser(prog="nlosplan", formatter_class=argparse.RawDescriptionHelpFormatter,
-                description="Sensor design and experiment planning for non-line-of-sight imaging "
-                            "with low-cost flash dToF LiDARs (TMF8828 class).",
-                epilog="examples:\n" + "\n".join(f"  {e}" for key in EXAMPLES for e in _examples(key)))
-    p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-
-    sensor = sub.add_parser("sensor", help="list, show and measure sensor presets",
-                            description="Sensor presets: list them, show one, measure the time base from data.")
-    ssub = sensor.add_subparsers(dest="sensor_command", metavar="SUBCOMMAND", parser_class=_Parser)
-    s_list = _sub(ssub, "list", "sensor list", "list the sensor presets")
-    s_list.add_argument("--json", action="store_true", help="machine-readable output")
-    s_list.set_defaults(func=_cmd_sensor_list)
-    s_show = _sub(ssub, "show", "sensor show", "show one preset (or a .toml/.json sensor file)")
-    s_show.add_argument("name", help="preset name or path to a .toml/.json sensor file")
-    fmt = s_show.add_mutually_exclusive_group()
-    fmt.add_argument("--json", action="store_true", help="print JSON")
-    fmt.add_argument("--toml", action="store_true", help="print TOML (save it and pass the file as --sensor)")
-    s_show.set_defaults(func=_cmd_sensor_show)
-    s_fit = _sub(ssub, "fit-timebase", "sensor fit-timebase",
-                 "measure bin width, time offset and pulse shape from TMF882x plane-at-distance captures")
-    s_fit.add_argument("path", help="JSON list of captures with dist_to_plane, hists, reference_hist")
-    s_fit.add_argument("--json", action="store_true", help="machine-readable output")
-    s_fit.set_defaults(func=_cmd_sensor_fit)
-
-    _add_simulate(sub)
-
-    chk = _sub(sub, "check", "check", "run the stability catalog (stiff and extreme cases); exit 0 only if all pass")
-    chk.add_argument("--json", action="store_true", help='print {"cases": [{"name", "passed", "detail"}...]}')
-    chk.set_defaults(func=_cmd_check)
-
-    bench = sub.add_parser("bench", help="benchmarks that print figures", description="Benchmarks that print figures.")
-    bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=_Parser)
-    bh = _sub(bsub, "histogram", "bench histogram",
-              "histograms per second: 3x3x128 and 8x8x128, jitter + ambient + Poisson, single and vmap-batched")
-    bh.add_argument("--batch", type=int, default=256, help="frames per batched call (default: %(default)s)")
-    bh.add_argument("--seconds", type=float, default=1.0, help="minimum timed seconds per figure")
-    bh.add_argument("--arrivals", type=int, default=16, help="arrival impulses per zone (default: %(default)s)")
-    bh.add_argument("--json", action="store_true", help="machine-readable output")
-    bh.set_defaults(func=_cmd_bench_histogram)
-    return p
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        func = getattr(args, "func", None)
-        if func is None:
-            parser.print_help(sys.stderr)
-            return EXIT_USAGE
-        return int(func(args) or 0)
-    except UserError as exc:
-        print(f"nlosplan: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("nlosplan: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into e.g. `head`, which closed early
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())

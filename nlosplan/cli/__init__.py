@@ -1,0 +1,57 @@
+"""The ``nlosplan`` command: argument parsing and calls into the rooms.
+
+One module per subcommand (``sensor``, ``simulate``, ``check``, ``bench``);
+each adds its parser and holds no logic beyond parsing and calling the rooms.
+User errors (:class:`nlosplan.errors.UserError`, bad arguments) print one
+line on stderr and exit with code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from nlosplan import __version__
+from nlosplan.cli import bench, check, sensor, simulate
+from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
+from nlosplan.errors import UserError
+
+__all__ = ["EXIT_USAGE", "build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``nlosplan`` argument parser."""
+    p = Parser(prog="nlosplan", formatter_class=argparse.RawDescriptionHelpFormatter,
+                description="Sensor design and experiment planning for non-line-of-sight imaging "
+                            "with low-cost flash dToF LiDARs (TMF8828 class).",
+                epilog="examples:\n" + "\n".join(f"  {e}" for key in EXAMPLES for e in examples(key)))
+    p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+
+    for room in (sensor, simulate, check, bench):
+        room.add(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        func = getattr(args, "func", None)
+        if func is None:
+            parser.print_help(sys.stderr)
+            return EXIT_USAGE
+        return int(func(args) or 0)
+    except UserError as exc:
+        print(f"nlosplan: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("nlosplan: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into e.g. `head`, which closed early
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+

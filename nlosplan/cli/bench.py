@@ -1,0 +1,195 @@
+"""``nlosplan bench``: benchmarks that print figures (histogram formation, the fast simulator)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+from nlosplan.cli.common import Parser, emit, sub_parser
+from nlosplan.errors import UserError
+from nlosplan.simulators.fast.bench import (
+    DEFAULT_LEVELS,
+    DEFAULT_PLOT,
+    DEFAULT_REFERENCE_POSITIONS,
+    Progress,
+    _check_levels,
+    bench_simulate,
+    bench_steps,
+)
+from nlosplan.simulators.presets.denali import N_POSITIONS
+
+def _cmd_bench_histogram(args) -> int:
+    from nlosplan.reports.tables import format_table
+    from nlosplan.sensor_models.bench import bench_histogram
+
+    res = bench_histogram(batch=args.batch, min_seconds=args.seconds, arrivals_per_zone=args.arrivals)
+    cols = ["zones", "dtype", "mode", "frames_per_second", "zone_histograms_per_second", "compile_seconds", "speedup_vs_numpy"]
+    emit(args, res, format_table(res["rows"], cols) + f"\n({res['config']['terms']}; "
+          f"{res['config']['arrivals_per_zone']} arrivals per zone; devices {res['config']['jax_devices']})")
+    return 0
+
+
+# ----------------------------------------------------------------- bench simulate
+def _int_list(text: str) -> list[int]:
+    try:
+        out = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of integers") from None
+    if not out:
+        raise argparse.ArgumentTypeError("give at least one integer")
+    return out
+
+
+def _level_list(text: str) -> list[str]:
+    out = [v.strip() for v in text.split(",") if v.strip()]
+    try:
+        _check_levels(out)
+    except UserError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return out
+
+
+def _n_positions(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 1 <= n <= N_POSITIONS:
+        raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: 1 to {N_POSITIONS}")
+    return n
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{n} must be >= 1")
+    return n
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the options of ``nlosplan bench simulate`` to ``parser``."""
+    parser.add_argument("--levels", type=_level_list, default=list(DEFAULT_LEVELS),
+                        help=f"comma-separated fidelity levels (default: {','.join(DEFAULT_LEVELS)})")
+    parser.add_argument("--positions", type=_n_positions, default=N_POSITIONS, metavar="N",
+                        help=f"batch over the first N of the {N_POSITIONS} DENALI positions (default: %(default)s)")
+    parser.add_argument("--reference-positions", type=_int_list, default=None, metavar="P,P,...",
+                        help="positions of the float64 reference (~10-20 s each; default: "
+                             f"{','.join(map(str, DEFAULT_REFERENCE_POSITIONS))}, those among the first N)")
+    parser.add_argument("--object", default="A", help="DENALI object (default: %(default)s)")
+    parser.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: %(default)s)")
+    parser.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
+    parser.add_argument("--dtype", default="float32", choices=["float32", "float64"],
+                        help="precision of the timed levels (default: %(default)s; the reference is float64)")
+    parser.add_argument("--repeats", type=_positive, default=3, help="timed calls per figure, best kept (default: 3)")
+    parser.add_argument("--plot", default=DEFAULT_PLOT, help="error-against-run-time PNG ('' for none; default: %(default)s)")
+    parser.add_argument("--json", action="store_true", help="machine-readable output")
+    return parser
+
+
+def reference_positions_for(n_positions: int, given: Sequence[int] | None) -> tuple[int, ...]:
+    """The reference positions of a run over the first ``n_positions`` (defaults that fit, else 0)."""
+    if given is not None:
+        return tuple(given)
+    fit = tuple(p for p in DEFAULT_REFERENCE_POSITIONS if p < n_positions)
+    return fit or (0,)
+
+
+def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **options) -> tuple[dict, str]:
+    """Run the benchmark from parsed options and write the plot.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        From a parser prepared by :func:`add_arguments`.
+    progress : callable, optional
+        Called with a short text per step (:func:`bench_steps` of them).
+    **options
+        Further keywords of :func:`bench_simulate` (``study_level``, ``matmul_n``).
+
+    Returns
+    -------
+    result : dict
+        As :func:`bench_simulate`, with ``plot`` (the PNG path) when one was written.
+    text : str
+        :func:`format_bench_simulate` and the plot path.
+    """
+    positions = range(args.positions)
+    result = bench_simulate(levels=tuple(args.levels), positions=positions,
+                            reference_positions=reference_positions_for(args.positions, args.reference_positions),
+                            obj=args.object, size=args.size, sensor=args.sensor, dtype=args.dtype,
+                            repeats=args.repeats, progress=progress, **options)
+    from nlosplan.reports.bench_text import format_bench_simulate
+
+    text = format_bench_simulate(result)
+    if args.plot:
+        from nlosplan.reports.error_runtime_plot import plot_error_runtime
+
+        cfg = result["config"]
+        path = plot_error_runtime(
+            result["levels"], args.plot,
+            title=f"fast simulator: DENALI {cfg['object']}_{cfg['size']}, {cfg['zones']}x{cfg['n_bins']}, {cfg['dtype']}",
+            reference_self_error=result["reference"]["reference_self_error"])
+        result["plot"] = str(path)
+        text += f"\nplot: {path}"
+    return result, text
+
+
+
+
+def _cmd_bench_simulate(args) -> int:
+    progress = None
+    bar = None
+    if not args.json and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions)),
+                   desc="bench simulate", unit="step", file=sys.stderr, leave=False)
+
+        def progress(text: str) -> None:
+            bar.set_postfix_str(text[:60])
+            bar.update(1)
+
+    try:
+        result, text = run_from_args(args, progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    emit(args, result, text)
+    return 0
+
+
+def add(sub) -> None:
+    """The ``bench`` subcommand with ``histogram`` and ``simulate``."""
+    bench = sub.add_parser("bench", help="benchmarks that print figures", description="Benchmarks that print figures.")
+    bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=Parser)
+    bh = sub_parser(bsub, "histogram", "bench histogram",
+                    "histograms per second: 3x3x128 and 8x8x128, jitter + ambient + Poisson, single and vmap-batched")
+    bh.add_argument("--batch", type=int, default=256, help="frames per batched call (default: %(default)s)")
+    bh.add_argument("--seconds", type=float, default=1.0, help="minimum timed seconds per figure")
+    bh.add_argument("--arrivals", type=int, default=16, help="arrival impulses per zone (default: %(default)s)")
+    bh.add_argument("--json", action="store_true", help="machine-readable output")
+    bh.set_defaults(func=_cmd_bench_histogram)
+    bs = sub_parser(bsub, "simulate", "bench simulate",
+                    "error against run time of the fast simulator on DENALI 3x3: every fidelity level single and "
+                    "batched over the 100 positions, its error against a converged reference, what pruning saves",
+                    description=BENCH_SIMULATE_DESCRIPTION)
+    add_arguments(bs)
+    bs.set_defaults(func=_cmd_bench_simulate)
+
+
+BENCH_SIMULATE_DESCRIPTION = """\
+Error against run time of the fast simulator (DENALI rig, 3x3 zones, 128 bins).
+
+For each fidelity level: seconds per scene one at a time and batched over the
+gantry positions (JAX compile time apart), histograms per second, and the error
+of the three-bounce histogram (expected minus the no-object background) against
+a converged float64 reference: relative L1 and centroid shift in bins. Also the
+reference's own error, what pruning saves (pruned vs prune=False, the centre
+zone alone, lights off vs on), and the arithmetic rate against a float32 matrix
+product measured in the same process. Takes a few minutes (the reference).
+JSON: {"levels": [{"fidelity", "scenes_per_second", "rel_l1_error",
+"centroid_shift_bins", ...}...], "reference", "pruning", "arithmetic", ...}."""

@@ -1,0 +1,63 @@
+"""Shared pieces of the ``nlosplan`` command: the one-line-error parser, output, examples."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from nlosplan.errors import UserError
+
+EXIT_USAGE = 2
+
+
+class Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line and exit 2."""
+
+    def error(self, message: str):  # noqa: D401 - argparse API
+        raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def emit(args, data, text: str) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(data, indent=2, default=float))
+    else:
+        print(text)
+
+
+EXAMPLES = {
+    "sensor list": "nlosplan sensor list",
+    "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
+    "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
+    "simulate": (
+        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19.npy --plot out/a19.png",
+        "nlosplan simulate --scene corner --object-xy 0.45,0.30 --object A_8in --reflectance retroreflective "
+        "--zones 8x8 --explain",
+        "nlosplan simulate --scene wall --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 "
+        "--out out/h.npy --plot out/h.png",
+    ),
+    "check": "nlosplan check --json",
+    "bench histogram": "nlosplan bench histogram --json",
+    "bench simulate": "nlosplan bench simulate --levels draft,low,default --reference-positions 0,45 --json",
+}
+
+
+def examples(key: str) -> tuple[str, ...]:
+    """The example command lines of a (sub)command."""
+    value = EXAMPLES[key]
+    return value if isinstance(value, tuple) else (value,)
+
+
+def sub_parser(subparsers, name: str, key: str, help_text: str, description: str | None = None) -> argparse.ArgumentParser:
+    lines = examples(key)
+    head = "example:" if len(lines) == 1 else "examples:"
+    return subparsers.add_parser(name, help=help_text, description=description or help_text,
+                                 epilog=head + "\n" + "\n".join(f"  {e}" for e in lines),
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def note(args, message: str) -> None:
+    """One line on stderr before long work, only for a person watching a terminal (not with --json)."""
+    if not args.json and sys.stderr.isatty():
+        print(message, file=sys.stderr, flush=True)
+

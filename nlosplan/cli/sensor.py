@@ -1,0 +1,64 @@
+"""``nlosplan sensor``: list, show and measure sensor presets."""
+
+from __future__ import annotations
+
+from nlosplan.cli.common import Parser, emit, sub_parser
+
+def _cmd_sensor_list(args) -> int:
+    from nlosplan.reports.tables import format_table
+    from nlosplan.sensor_models import PRESET_NAMES, preset
+
+    rows = []
+    for name in PRESET_NAMES:
+        s = preset(name)
+        rows.append(dict(name=name, zones=f"{s.zones_rows}x{s.zones_cols}", bins=s.n_bins,
+                         bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
+                         pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
+                         iterations=s.iterations))
+    emit(args, {"presets": rows}, format_table(rows))
+    return 0
+
+
+def _cmd_sensor_show(args) -> int:
+    from nlosplan.sensor_models import resolve_sensor
+
+    s = resolve_sensor(args.name)
+    if args.toml:
+        print(s.to_toml())
+    elif args.json:
+        print(s.to_json())
+    else:
+        for k, v in s.to_dict().items():
+            if k == "pulse_shape" and v is not None:
+                v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
+            print(f"{k:>22} = {v}")
+    return 0
+
+
+def _cmd_sensor_fit(args) -> int:
+    from nlosplan.sensor_models.tmf882x_report import fit_report
+
+    report = fit_report(args.path)
+    emit(args, report, report["summary"])
+    return 0
+
+
+def add(sub) -> None:
+    """The ``sensor`` subcommand and its subcommands."""
+    sensor = sub.add_parser("sensor", help="list, show and measure sensor presets",
+                            description="Sensor presets: list them, show one, measure the time base from data.")
+    ssub = sensor.add_subparsers(dest="sensor_command", metavar="SUBCOMMAND", parser_class=Parser)
+    s_list = sub_parser(ssub, "list", "sensor list", "list the sensor presets")
+    s_list.add_argument("--json", action="store_true", help="machine-readable output")
+    s_list.set_defaults(func=_cmd_sensor_list)
+    s_show = sub_parser(ssub, "show", "sensor show", "show one preset (or a .toml/.json sensor file)")
+    s_show.add_argument("name", help="preset name or path to a .toml/.json sensor file")
+    fmt = s_show.add_mutually_exclusive_group()
+    fmt.add_argument("--json", action="store_true", help="print JSON")
+    fmt.add_argument("--toml", action="store_true", help="print TOML (save it and pass the file as --sensor)")
+    s_show.set_defaults(func=_cmd_sensor_show)
+    s_fit = sub_parser(ssub, "fit-timebase", "sensor fit-timebase",
+                       "measure bin width, time offset and pulse shape from TMF882x plane-at-distance captures")
+    s_fit.add_argument("path", help="JSON list of captures with dist_to_plane, hists, reference_hist")
+    s_fit.add_argument("--json", action="store_true", help="machine-readable output")
+    s_fit.set_defaults(func=_cmd_sensor_fit)

@@ -1,0 +1,354 @@
+"""Error against run time of the fast simulator (``nlosplan bench simulate``).
+
+For each fidelity level the benchmark times DENALI 3x3 expected histograms
+one scene per call and batched over the gantry positions (JAX compile time
+apart), and measures the error of the three-bounce (object) histogram
+against a converged float64 reference. It also times what pruning saves
+(the plan leaving out what a scene does not need) and compares the achieved
+arithmetic rate with a float32 matrix product measured in the same process.
+
+Error measures (on the background-subtracted three-bounce histogram
+``h = expected(parts=True)["object"]``, which is ``expected - background``
+without pile-up and saturation):
+
+- relative L1: ``sum |h - ref| / sum |ref|`` over all zones and bins, the
+  largest over the reference positions;
+- centroid shift: ``|c(h) - c(ref)|`` in bins with ``c(h) = sum_b b h_b /
+  sum_b h_b`` per zone, the largest over positions and over zones that hold
+  at least :data:`CENTROID_MIN_SHARE` of the largest zone's object light.
+
+Examples
+--------
+>>> res = bench_simulate(levels=("draft",), positions=range(4), reference_positions=(0,))  # doctest: +SKIP
+>>> print(format_bench_simulate(res))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.presets import resolve_sensor
+from nlosplan.simulators.fast.bench_metrics import (
+    CENTROID_MIN_SHARE,
+    FLOPS_DEPOSIT,
+    FLOPS_FAR_COUPLING,
+    FLOPS_POLYGON,
+    FLOPS_RETRO_PATH,
+    MATMUL_N,
+    best_time,
+    errors,
+    flop_estimate,
+    load_average,
+    machine_facts,
+    matmul_gflops,
+    max_rel_diff,
+    xla_cost,
+)
+from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
+from nlosplan.simulators.fast.simulator import FastSimulator
+from nlosplan.simulators.presets.denali import N_POSITIONS, denali_scene
+
+#: Target of the fast simulator: relative L1 error of the object histogram at most this ...
+TARGET_REL_L1 = 0.01
+#: ... at this many DENALI 3x3x128 expected histograms per second, batched.
+TARGET_SCENES_PER_SECOND = 200.0
+#: Stretch target (histograms per second).
+STRETCH_SCENES_PER_SECOND = 1000.0
+#: Default levels, reference positions and plot path.
+DEFAULT_LEVELS = ("draft", "low", "default", "high")
+DEFAULT_REFERENCE_POSITIONS = (0, 19, 45, 77, 99)
+DEFAULT_PLOT = "nlosplan-out/bench_simulate.png"
+#: The level whose pruning and arithmetic are studied.
+STUDY_LEVEL = "default"
+
+Progress = Callable[[str], None]
+
+
+def _check_levels(levels: Iterable[str]) -> tuple[str, ...]:
+    out = tuple(levels)
+    allowed = [k for k in FIDELITY_LEVELS if k != "reference"]
+    if not out:
+        raise UserError(f"give at least one fidelity level; allowed: {', '.join(allowed)}")
+    for lv in out:
+        if lv == "reference":
+            raise UserError("the 'reference' level is the benchmark's reference; it cannot also be a timed level")
+        if lv not in FIDELITY_LEVELS:
+            raise UserError(f"unknown fidelity level {lv!r}; allowed: {', '.join(allowed)}")
+    if len(set(out)) != len(out):
+        raise UserError("a fidelity level is given twice")
+    return out
+
+
+def _check_positions(positions: Iterable[int], what: str) -> tuple[int, ...]:
+    out = tuple(positions)
+    if not out:
+        raise UserError(f"give at least one {what}")
+    for p in out:
+        if isinstance(p, bool) or not isinstance(p, (int, np.integer)) or not 0 <= p < N_POSITIONS:
+            raise UserError(f"{what} {p!r} is not allowed; allowed: integers 0 to {N_POSITIONS - 1}")
+    if len(set(out)) != len(out):
+        raise UserError(f"a {what} is given twice")
+    return tuple(int(p) for p in out)
+
+
+def bench_steps(levels: Sequence[str] = DEFAULT_LEVELS, reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS) -> int:
+    """Number of ``progress`` calls :func:`bench_simulate` makes (for a progress bar)."""
+    return 2 * len(levels) + 2 * len(reference_positions) + 5
+
+
+def _warm_and_time(sim: FastSimulator, repeats: int, min_seconds: float) -> tuple[float, float]:
+    """``(first_call_seconds, best_call_seconds)`` of ``sim.expected()``; the first call compiles."""
+    t0 = time.perf_counter()
+    sim.expected()
+    first = time.perf_counter() - t0
+    return first, best_time(sim.expected, repeats, min_seconds)
+
+
+def _built(scenes, sensor, **kw) -> tuple[FastSimulator, float]:
+    t0 = time.perf_counter()
+    sim = FastSimulator(scenes, sensor, **kw)
+    return sim, time.perf_counter() - t0
+
+
+def bench_simulate(
+    *,
+    levels: Sequence[str] = DEFAULT_LEVELS,
+    positions: Iterable[int] = range(N_POSITIONS),
+    reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS,
+    obj: str = "A",
+    size: str = "8in",
+    sensor: str | SensorConfig = "tmf8828-3x3-short",
+    dtype: str = "float32",
+    repeats: int = 3,
+    progress: Progress | None = None,
+    study_level: str = STUDY_LEVEL,
+    matmul_n: int = MATMUL_N,
+    min_seconds: float = 1.0,
+) -> dict:
+    """Error against run time of the fast simulator on the DENALI preset.
+
+    Parameters
+    ----------
+    levels : sequence of str
+        Fidelity levels to time (names of :data:`FIDELITY_LEVELS`, not ``reference``).
+    positions : iterable of int
+        Gantry positions of the batched timing (0..99).
+    reference_positions : sequence of int
+        Positions (among ``positions``) where the error is measured against
+        the float64 ``reference`` level (about 10-20 s each on a CPU).
+    obj, size : str
+        DENALI object and size.
+    sensor : str or SensorConfig
+        Preset name, sensor file, or configuration.
+    dtype : {"float32", "float64"}
+        Precision of the timed levels (the reference is always float64).
+    repeats : int
+        Timed calls per figure, at least (the fastest is kept).
+    progress : callable, optional
+        Called with a short text before each step (:func:`bench_steps` of them).
+    study_level : str
+        Level of the pruning study and of the arithmetic estimate.
+    matmul_n : int
+        Size of the float32 matrix product that measures the arithmetic peak.
+    min_seconds : float
+        Each figure keeps calling for at least this long (the fastest call is
+        kept), so that a busy machine has quiet moments to show.
+
+    Returns
+    -------
+    dict
+        ``levels`` (one dict per level: ``fidelity``, ``knobs``,
+        ``seconds_single``, ``seconds_per_scene_batched``,
+        ``scenes_per_second``, ``compile_seconds``, ``rel_l1_error``,
+        ``centroid_shift_bins`` and more), ``reference``, ``pruning``,
+        ``arithmetic``, ``machine`` and ``config``.
+    """
+    levels = _check_levels(levels)
+    _check_levels([study_level])
+    positions = _check_positions(positions, "position")
+    reference_positions = _check_positions(reference_positions, "reference position")
+    missing = sorted(set(reference_positions) - set(positions))
+    if missing:
+        raise UserError(f"reference positions {missing} are not among the timed positions; "
+                        "choose reference positions inside --positions")
+    if str(dtype) not in ("float32", "float64"):
+        raise UserError(f"dtype={dtype!r} is not supported; allowed: float32, float64")
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
+        raise UserError(f"repeats={repeats!r} must be an integer >= 1")
+    sensor_cfg = resolve_sensor(sensor) if isinstance(sensor, str) else sensor
+    if not isinstance(sensor_cfg, SensorConfig):
+        raise UserError("sensor must be a preset name, a sensor file, or a SensorConfig")
+    say = progress or (lambda _text: None)
+    machine = machine_facts()
+    t_start = time.perf_counter()
+
+    scenes = [denali_scene(obj, size, p) for p in positions]
+    index = {p: i for i, p in enumerate(positions)}
+    single_position = reference_positions[0]
+    rows: list[dict] = []
+    level_objects: dict[str, dict] = {}
+    for lv in levels:
+        say(f"{lv}: batched over {len(scenes)} positions")
+        sim, plan_s = _built(scenes, sensor_cfg, fidelity=lv, dtype=dtype)
+        first, best = _warm_and_time(sim, repeats, min_seconds)
+        obj_h = sim.expected(parts=True)["object"]
+        level_objects[lv] = {p: obj_h[index[p]] for p in reference_positions}
+        say(f"{lv}: one scene per call")
+        one, plan1_s = _built(scenes[index[single_position]], sensor_cfg, fidelity=lv, dtype=dtype)
+        first1, single = _warm_and_time(one, repeats, min_seconds)
+        rows.append({
+            "fidelity": lv,
+            "knobs": FIDELITY_LEVELS[lv].to_dict(),
+            "seconds_single": single,
+            "seconds_per_scene_batched": best / len(scenes),
+            "scenes_per_second": len(scenes) / best,
+            "compile_seconds": max(first1 - single, 0.0),
+            "rel_l1_error": math.nan,
+            "centroid_shift_bins": math.nan,
+            "compile_seconds_batched": max(first - best, 0.0),
+            "plan_seconds_single": plan1_s,
+            "plan_seconds_batched": plan_s,
+            "paths_per_scene": sim.plan.paths,
+            "paths_per_scene_single": one.plan.paths,
+        })
+
+    reference = _reference(scenes, index, reference_positions, sensor_cfg, say)
+    for row in rows:
+        err = errors(level_objects[row["fidelity"]], reference["_ref"])
+        row.update(rel_l1_error=err["rel_l1_error"], centroid_shift_bins=err["centroid_shift_bins"],
+                   errors_per_position=err["per_position"])
+    reference.pop("_ref")
+
+    pruning, study_sim = _pruning(obj, size, positions, sensor_cfg, study_level, dtype, repeats, min_seconds, say)
+    say("arithmetic: flop count and float32 matmul peak")
+    arithmetic = _arithmetic(study_sim, pruning["prune_seconds"], repeats, matmul_n, min_seconds)
+    machine["load_average_end"] = load_average()
+    return {
+        "levels": rows,
+        "reference": reference,
+        "pruning": pruning,
+        "arithmetic": arithmetic,
+        "machine": machine,
+        "config": {
+            "preset": "denali", "object": obj, "size": size, "sensor": sensor_cfg.name, "dtype": str(dtype),
+            "zones": f"{sensor_cfg.zones_rows}x{sensor_cfg.zones_cols}", "n_bins": sensor_cfg.n_bins,
+            "lights": "off", "positions": list(positions), "reference_positions": list(reference_positions),
+            "single_position": single_position, "repeats": int(repeats), "min_seconds": float(min_seconds),
+            "timing": "fastest call (at least repeats calls and min_seconds of calling), compile excluded",
+            "error_of": "object part (expected - background, before pile-up and saturation)",
+            "centroid_min_share": CENTROID_MIN_SHARE, "target_rel_l1": TARGET_REL_L1,
+            "target_scenes_per_second": TARGET_SCENES_PER_SECOND,
+            "stretch_scenes_per_second": STRETCH_SCENES_PER_SECOND,
+            "total_seconds": time.perf_counter() - t_start,
+        },
+    }
+
+
+def _reference(scenes, index, reference_positions, sensor, say) -> dict:
+    ref_fid = FIDELITY_LEVELS["reference"]  # looked up now: tests may replace the level
+    half_fid = Fidelity(**{**ref_fid.to_dict(), "object_samples": max(1, ref_fid.object_samples // 2)})
+    ref, half, seconds, paths = {}, {}, [], []
+    n = len(reference_positions)
+    for k, p in enumerate(reference_positions):
+        say(f"reference: position {p} ({k + 1}/{n}, float64)")
+        t0 = time.perf_counter()
+        sim = FastSimulator(scenes[index[p]], sensor, fidelity=ref_fid, dtype="float64")
+        ref[p] = sim.expected(parts=True)["object"]
+        seconds.append(time.perf_counter() - t0)
+        paths.append(sim.plan.paths)
+        del sim
+        say(f"reference: position {p} with half the object samples ({k + 1}/{n})")
+        half[p] = FastSimulator(scenes[index[p]], sensor, fidelity=half_fid, dtype="float64").expected(parts=True)["object"]
+    self_err = errors(half, ref)
+    return {
+        "fidelity": "reference", "knobs": ref_fid.to_dict(), "dtype": "float64",
+        "positions": list(reference_positions), "seconds_per_scene": seconds, "paths_per_scene": paths,
+        "half_knobs": half_fid.to_dict(),
+        "reference_self_error": self_err["rel_l1_error"],
+        "reference_self_centroid_shift_bins": self_err["centroid_shift_bins"],
+        "self_error_per_position": self_err["per_position"],
+        "_ref": ref,
+    }
+
+
+def _pruning(obj, size, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:
+    """Pruned against full plans, the centre zone against all, lights off against on (batched).
+
+    The pruned run has the same plan as the level's batched run, so its compiled code is reused.
+    """
+    off = [denali_scene(obj, size, p, lights="off") for p in positions]
+    on = [denali_scene(obj, size, p, lights="on") for p in positions]
+    n = len(positions)
+    rc, cc = sensor.zones_rows // 2, sensor.zones_cols // 2
+    kw = dict(fidelity=level, dtype=dtype)
+    runs = {}
+    for name, scenes, extra, text, parts in (
+        ("pruned", off, {}, "pruned plan (lights off, all zones)", True),
+        ("full", off, {"prune": False}, "full plan (prune=False)", True),
+        ("centre", off, {"zones": [(rc, cc)]}, "centre zone only", True),
+        ("lights_on", on, {}, "lights on", False),
+    ):
+        say(f"pruning ({level}): {text}")
+        sim = FastSimulator(scenes, sensor, **kw, **extra)
+        _, best = _warm_and_time(sim, repeats, min_seconds)
+        runs[name] = (sim, best / n, sim.expected(parts=True) if parts else None)
+    pr, full, centre, lon = (runs[k] for k in ("pruned", "full", "centre", "lights_on"))
+    out = {
+        "level": level,
+        "positions": n,
+        "prune_seconds": pr[1],
+        "no_prune_seconds": full[1],
+        "prune_speedup": full[1] / pr[1],
+        "pruned_vs_full_max_rel_diff": max(max_rel_diff(pr[2]["counts"], full[2]["counts"]),
+                                           max_rel_diff(pr[2]["object"], full[2]["object"])),
+        "pruned_vs_full_max_rel_diff_counts": max_rel_diff(pr[2]["counts"], full[2]["counts"]),
+        "pruned_vs_full_max_rel_diff_object": max_rel_diff(pr[2]["object"], full[2]["object"]),
+        "paths_pruned": pr[0].plan.paths,
+        "paths_full": full[0].plan.paths,
+        "centre_zone": [rc, cc],
+        "centre_zone_seconds": centre[1],
+        "all_zones_seconds": pr[1],
+        "centre_zone_speedup": pr[1] / centre[1],
+        "centre_vs_all_max_rel_diff": max(
+            max_rel_diff(centre[2]["counts"][:, 0], pr[2]["counts"][:, rc, cc]),
+            max_rel_diff(centre[2]["object"][:, 0], pr[2]["object"][:, rc, cc])),
+        "paths_centre_zone": centre[0].plan.paths,
+        "lights_off_seconds": pr[1],
+        "lights_on_seconds": lon[1],
+        "lights_off_speedup": lon[1] / pr[1],
+        "left_out_pruned": [t["name"] + ": " + t["reason"] for t in pr[0].plan.to_dict()["left_out"]],
+    }
+    return out, pr[0]
+
+
+def _arithmetic(sim: FastSimulator, seconds_per_scene: float, repeats: int, matmul_n: int, min_seconds: float) -> dict:
+    est = flop_estimate(sim.plan)
+    xla = xla_cost(sim)
+    peak = matmul_gflops(matmul_n, "float32", repeats, min_seconds)
+    achieved = est["flops"] / seconds_per_scene / 1e9
+    out = {
+        "level": _level_name(sim.plan.fidelity),
+        "paths_per_scene": sim.plan.paths,
+        "flops_per_scene": est["flops"],
+        "flops_breakdown": {k: v for k, v in est.items() if k != "flops"},
+        "flops_per_path": {"far_coupling": FLOPS_FAR_COUPLING, "weight_and_time": FLOPS_RETRO_PATH,
+                           "deposit": FLOPS_DEPOSIT, "near_field_polygon": FLOPS_POLYGON},
+        "seconds_per_scene": seconds_per_scene,
+        "achieved_gflops": achieved,
+        "matmul_peak": peak,
+        "fraction_of_peak": achieved / peak["gflops"],
+        "xla_cost_analysis": xla,
+    }
+    if xla.get("available"):
+        out["achieved_gflops_xla_count"] = xla["flops"] / seconds_per_scene / 1e9
+    return out
+
+
+def _level_name(fid: Fidelity) -> str:
+    return next((k for k, v in FIDELITY_LEVELS.items() if v == fid), "custom")
