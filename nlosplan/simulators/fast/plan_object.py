@@ -15,6 +15,7 @@ import numpy as np
 from nlosplan.constants import C_M_PER_PS, FWHM_PER_SIGMA
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.simulators.fast.fidelity import Fidelity
+from nlosplan.simulators.fast.transport import GRAZING_SIGMAS
 from nlosplan.simulators.fast.geometry import WallCells, flash_extent_tan, tangent_cells, wall_cells
 from nlosplan.simulators.meshes import surface_quadrature
 from nlosplan.simulators.scene import HiddenObject, Scene
@@ -160,7 +161,7 @@ def _lobe_spread(scene: Scene, cells: WallCells, jac: np.ndarray, centers: np.nd
         e = cells.centers - c
         dist = np.linalg.norm(e, axis=1)
         e = e / dist[:, None]
-        en = np.minimum(e @ n_w, -1e-3)
+        en = np.minimum(e @ n_w, -math.sin(GRAZING_SIGMAS * sigma))  # as the transport holds it
         jp = jac - (jac @ e[:, :, None]) / en[:, None, None] * n_w[None, None, :]
         s = (dist + rad) * sigma * np.linalg.norm(jp, axis=2).max(axis=1)
         out = np.maximum(out, s)

@@ -23,7 +23,8 @@ radiance ``L_i = (rho_w / pi) I dOmega / A``. An object point ``x`` (area
   ``(rho_w / pi) s cos / r^2`` of it, along ``2 (r_i + d_i)``. With a lobe
   of non-zero width the share of each zone is the lobe's Gaussian mass over
   the zone's tangent-plane rectangle (spread ``d_i sigma`` mapped by the
-  wall-to-image Jacobian). Integrated over a zone footprint the return
+  wall-to-image Jacobian; at grazing elevations below ``GRAZING_SIGMAS``
+  lobe widths the spread is held at its value there). Integrated over a zone footprint the return
   falls as ``1/d^2``; point-wise (a lobe wider than a zone) as ``1/d^4``.
 """
 
@@ -37,6 +38,9 @@ from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
+
+#: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
+GRAZING_SIGMAS = 3.0
 
 
 def gaussian_sigma(pulse_fwhm_ps, jitter_fwhm_ps):
@@ -82,7 +86,9 @@ def _lobe_fractions(a, x, w, sigma):
     dbar = jnp.sqrt(jnp.sum(e * e, -1))
     e = e / dbar[:, None]
     n_w = a["n_w"]
-    en = jnp.minimum(e @ n_w, -1e-3)
+    # first-order spread ~ 1 / sin(elevation above the wall); below GRAZING_SIGMAS lobe widths of elevation the
+    # landing spot is heavy-tailed, not Gaussian, and the spread is held at its value there
+    en = jnp.minimum(e @ n_w, -jnp.sin(GRAZING_SIGMAS * sigma))
     jac = a["jac"]  # (N1, 2, 3)
     jp = jac - (jac @ e[:, :, None]) / en[:, None, None] * n_w[None, None, :]
     spread = dbar[:, None] * sigma * jnp.sqrt(jnp.sum(jp * jp, -1))  # (N1, 2)
