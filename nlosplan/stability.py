@@ -46,9 +46,10 @@ class CaseResult:
 def all_cases() -> list[Case]:
     """Every case of every room that has one, sensor models first."""
     from nlosplan.sensor_models.stability_cases import CASES as sensor_cases
+    from nlosplan.simulators.fast.stability_cases import CASES as transport_cases
     from nlosplan.simulators.stability_cases import CASES as simulator_cases
 
-    return list(sensor_cases) + list(simulator_cases)
+    return list(sensor_cases) + list(simulator_cases) + list(transport_cases)
 
 
 def run_cases(cases: list[Case], progress: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
