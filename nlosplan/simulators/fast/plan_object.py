@@ -349,13 +349,26 @@ def plan_object(
         cosz = d_sensor[:, 2] / np.linalg.norm(d_sensor, axis=1)
         sens = cosz**sensor.sensitivity_cos_power
         arrays["recv"] = scene.wall.albedo / math.pi * sens * flash.cos / flash.r**2
-        k_lo = math.floor(float(grid.node_position(lo_t, sensor.bin_width_ps, t0))) - 1
-        k_hi = math.ceil(float(grid.node_position(hi_t, sensor.bin_width_ps, t0))) + 2
+        # near-wall pairs land anywhere in their cell: widen the time range by a cell diagonal each way
+        margin = 2 * float(np.linalg.norm(flash.corners[:, 2] - flash.corners[:, 0], axis=1).max()) / C_M_PER_PS \
+            if n_near["1"] else 0.0
+        k_lo = math.floor(float(grid.node_position(lo_t - margin, sensor.bin_width_ps, t0))) - 1
+        k_hi = math.ceil(float(grid.node_position(hi_t + margin, sensor.bin_width_ps, t0))) + 2
+        ue, ve = zone_edges_tan(sensor)
+        wall_uv = np.stack([(flash.corners - scene.wall.center) @ scene.wall.u_axis,
+                            (flash.corners - scene.wall.center) @ scene.wall.v_axis], axis=-1)  # (N1, 4, 2)
+        lid = scene.lidar
+        arrays.update(u_edges=ue, nv_edges=-ve, wall_u=scene.wall.u_axis, wall_v=scene.wall.v_axis,
+                      box1=np.stack([wall_uv[..., 0].min(1), wall_uv[..., 0].max(1),
+                                     wall_uv[..., 1].min(1), wall_uv[..., 1].max(1)], axis=1),
+                      lidar=np.stack([lid.position, lid.right, lid.up, lid.forward]),
+                      cell_row=np.array([local_row.get(int(z), -1) for z in flash.zone]),
+                      wall_rho_pi=np.array(scene.wall.albedo / math.pi),
+                      sens_power=np.array(float(sensor.sensitivity_cos_power)))
         n_r = bucket(k_hi - k_lo)
         arrays["k_r0"] = np.array(k_lo)
         if lobe:
-            ue, ve = zone_edges_tan(sensor)
-            arrays.update(uv=flash.uv, jac=jac, u_edges=ue, nv_edges=-ve, obj_zones=np.array(obj_zones))
+            arrays.update(uv=flash.uv, jac=jac, obj_zones=np.array(obj_zones))
         else:
             onehot = np.zeros((n1, len(obj_zones)))
             for i, z in enumerate(flash.zone):
@@ -394,7 +407,7 @@ def plan_object(
 
 
 #: Per-cell arrays of each leg; ``c{leg}t`` is (3, N), the others have the cell axis first.
-_LEG_KEYS = {"1": ("k1", "a1", "r1", "thr1", "l1", "recv", "uv", "jac", "frac"), "2": ("k2", "a2", "r2", "thr2", "l2", "row2")}
+_LEG_KEYS = {"1": ("k1", "a1", "r1", "thr1", "l1", "recv", "uv", "jac", "frac", "box1", "cell_row"), "2": ("k2", "a2", "r2", "thr2", "l2", "row2")}
 #: Wall-cell counts are padded to a multiple of this, near blocks to a multiple of NEAR_BUCKET.
 CELL_BUCKET = 32
 NEAR_BUCKET = 16

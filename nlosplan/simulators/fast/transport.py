@@ -63,16 +63,72 @@ def _coupling(a, p, leg: str, x, n, n_near: int):
     ``n_near`` indices) use the exact polygon form factor where a sample is
     closer than the cell's threshold ``thr``; padding indices are out of
     range and dropped.
+
+    Returns
+    -------
+    coupling, dist : array, shape (M, N)
+    near : tuple or None
+        ``(idx (K,), use (M, K), exact (M, K))`` for the near block.
     """
     height = (x - a["w0"]) @ a["n_w"]
     c, dist = far_coupling(a[f"c{leg}t"], a[f"a{leg}"], x, n, height)
-    if n_near:
-        idx = p[f"near{leg}"]
-        valid = idx < c.shape[1]
-        exact = polygon_coupling(x, n, jnp.take(a[f"k{leg}"], idx, axis=0, mode="clip"))
-        use = (jnp.take(dist, idx, axis=1, mode="clip") < jnp.take(a[f"thr{leg}"], idx, mode="clip")[None]) & valid
-        c = c.at[:, idx].set(jnp.where(use, exact, jnp.take(c, idx, axis=1, mode="clip")), mode="drop")
-    return c, dist
+    if not n_near:
+        return c, dist, None
+    idx = p[f"near{leg}"]
+    valid = idx < c.shape[1]
+    exact = polygon_coupling(x, n, jnp.take(a[f"k{leg}"], idx, axis=0, mode="clip"))
+    use = (jnp.take(dist, idx, axis=1, mode="clip") < jnp.take(a[f"thr{leg}"], idx, mode="clip")[None]) & valid
+    c = c.at[:, idx].set(jnp.where(use, exact, jnp.take(c, idx, axis=1, mode="clip")), mode="drop")
+    return c, dist, (idx, use, exact)
+
+
+def _landing_share(a, x, near):
+    """Share (M, K) of each near-wall pair's retro light that lands under the object.
+
+    ``1 / (1 + (h / a)^4)`` for a sample at height ``h`` over a cell of size
+    ``a`` (pairs using the exact coupling only): all of it when the object
+    nearly touches the wall (94 % at ``h = a / 2``), half at ``h = a``, and
+    almost none a few cell sizes away (0.2 % at ``5 a``), where the cell is
+    lit evenly and the light returns to its centre.
+    """
+    idx, use, _ = near
+    h = (x - a["w0"]) @ a["n_w"]
+    size2 = jnp.take(a["a1"], idx, mode="clip")
+    ratio2 = h[:, None] ** 2 / size2[None]
+    return jnp.where(use, 1.0 / (1.0 + ratio2 * ratio2), 0.0)
+
+
+def _retro_near(st, a, p, x, near, grid, bw, t0):
+    """Retro returns of the near-wall pairs' landing share (see :func:`_landing_share`): (Zobj, n_r).
+
+    A sample close to the wall compared with a cell is lit mostly by the part
+    of the cell under it and sends its retroreflected light straight back
+    there, not to the cell's centre: the landing point is the sample's foot
+    on the wall clamped into the cell, seen by the zone that contains it (the
+    lobe, ``h sigma`` wide, is a point at this range), with ``s cos / r^2``.
+    """
+    idx, use, exact = near
+    exact = exact * _landing_share(a, x, near)
+    lid = a["lidar"]  # rows: position, right, up, forward
+    h = (x - a["w0"]) @ a["n_w"]
+    foot = x - h[:, None] * a["n_w"][None]
+    fu, fv = (foot - a["w0"]) @ a["wall_u"], (foot - a["w0"]) @ a["wall_v"]
+    box = jnp.take(a["box1"], idx, axis=0, mode="clip")  # (K, 4): u min, u max, v min, v max
+    lu = jnp.clip(fu[:, None], box[None, :, 0], box[None, :, 1])
+    lv = jnp.clip(fv[:, None], box[None, :, 2], box[None, :, 3])
+    land = a["w0"] + lu[..., None] * a["wall_u"] + lv[..., None] * a["wall_v"]  # (M, K, 3)
+    q = land - lid[0]
+    r = jnp.sqrt(jnp.sum(q * q, -1))
+    fwd = jnp.maximum(q @ lid[3], 0.0)
+    # cells inside the field of view are zone-aligned: the landing point's zone is its cell's (-1: not computed)
+    zrow = jnp.take(a["cell_row"], idx, mode="clip")[None]
+    ok = use & (zrow >= 0)
+    recv = a["wall_rho_pi"] * (fwd / r) ** a["sens_power"] * jnp.maximum(-(q @ a["n_w"]), 0.0) / (r * r * r)
+    w = jnp.take(a["l1"], idx, mode="clip")[None] * exact * (p["albedo"] * p["areas"][:, None]) * recv
+    dl = jnp.sqrt(jnp.sum((land - x[:, None]) ** 2, -1))
+    pos = grid.node_position(2.0 * (r + dl) / C_M_PER_PS, bw, t0) - a["k_r0"]
+    rows = jnp.broadcast_to(jnp.maximum(zrow, 0), w.shape)
+    return deposit_at(pos, jnp.where(ok, w, 0.0), rows, st.n_rows, st.n_r)
 
 
 def _lobe_fractions(a, x, w, sigma):
@@ -101,8 +157,11 @@ def _lobe_fractions(a, x, w, sigma):
 
 def _retro(st, a, p, grid, bw, t0):
     x, n = _pose(p)
-    c, dist = _coupling(a, p, "1", x, n, st.near1)
+    c, dist, near = _coupling(a, p, "1", x, n, st.near1)
     w = a["l1"][None] * c * (p["albedo"] * p["areas"][:, None]) * a["recv"][None]
+    if near is not None:  # near-wall pairs land (in part) under the object, see _retro_near
+        share = jnp.zeros_like(w).at[:, near[0]].add(_landing_share(a, x, near), mode="drop")
+        w = w * (1.0 - share)
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
     n1 = a["a1"].shape[0]
@@ -112,18 +171,21 @@ def _retro(st, a, p, grid, bw, t0):
     sees = jnp.max((a["wall_corners"][None] - x[:, None]) @ n[:, :, None], axis=(1, 2)) > 0
     seen_area = p["areas"] * (sees & ((x - a["w0"]) @ a["n_w"] > 0))
     frac = _lobe_fractions(a, x, seen_area, a["lobe_sigma"]) if st.lobe else a["frac"]
-    return frac.T @ per_cell, a["k_r0"]
+    out = frac.T @ per_cell
+    if near is not None:
+        out = out + _retro_near(st, a, p, x, near, grid, bw, t0)
+    return out, a["k_r0"]
 
 
 def _lambertian(st, a, p, grid, bw, t0):
     x, n = _pose(p)
     m = x.shape[0]
     delta = bw / grid.oversample
-    c1, d1 = _coupling(a, p, "1", x, n, st.near1)
+    c1, d1, _ = _coupling(a, p, "1", x, n, st.near1)
     t1 = (a["r1"][None] + d1) / C_M_PER_PS
     rows1 = jnp.broadcast_to(jnp.arange(m)[:, None], c1.shape)
     leg1 = deposit_at((t1 - t0) / delta - 0.5 - a["j1"], a["l1"][None] * c1, rows1, m, st.n1)
-    c2, d2 = _coupling(a, p, "2", x, n, st.near2)
+    c2, d2, _ = _coupling(a, p, "2", x, n, st.near2)
     w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * p["areas"][:, None]
     t2 = (d2 + a["r2"][None]) / C_M_PER_PS
     rows2 = jnp.arange(m)[:, None] * st.n_rows + a["row2"][None]
