@@ -82,41 +82,57 @@ def _coupling(a, p, leg: str, x, n, n_near: int):
     return c, dist, (idx, use, exact)
 
 
-def _landing_share(a, x, near):
-    """Share (M, K) of each near-wall pair's retro light that lands under the object.
+def _near_point(a, leg: str, x, near):
+    """Where a near-wall pair's light meets the wall, and the share of the pair that it stands for.
 
-    ``1 / (1 + (h / a)^4)`` for a sample at height ``h`` over a cell of size
-    ``a`` (pairs using the exact coupling only): all of it when the object
-    nearly touches the wall (94 % at ``h = a / 2``), half at ``h = a``, and
-    almost none a few cell sizes away (0.2 % at ``5 a``), where the cell is
-    lit evenly and the light returns to its centre.
+    A sample close to the wall compared with a cell (height ``h``, cell size
+    ``a``) sees the cell's light come mostly from the part under it, not
+    from its centre: that point is the sample's foot on the wall clamped
+    into the cell. Its share ``1 / (1 + (h/a)^4) / (1 + (rho/a)^2)`` (``rho``
+    the foot's distance outside the cell) is all of the pair when the object
+    nearly touches the wall above the cell, half at ``h = a``, almost none a
+    few cell sizes away or aside, where the cell is lit evenly.
+
+    Returns
+    -------
+    land : array, shape (M, K, 3)
+    share : array, shape (M, K)
+        0 for pairs that do not use the exact coupling (and padding).
     """
     idx, use, _ = near
     h = (x - a["w0"]) @ a["n_w"]
-    size2 = jnp.take(a["a1"], idx, mode="clip")
-    ratio2 = h[:, None] ** 2 / size2[None]
-    return jnp.where(use, 1.0 / (1.0 + ratio2 * ratio2), 0.0)
+    foot = x - h[:, None] * a["n_w"][None]
+    fu, fv = (foot - a["w0"]) @ a["wall_u"], (foot - a["w0"]) @ a["wall_v"]
+    box = jnp.take(a[f"box{leg}"], idx, axis=0, mode="clip")  # (K, 4): u min, u max, v min, v max
+    lu = jnp.clip(fu[:, None], box[None, :, 0], box[None, :, 1])
+    lv = jnp.clip(fv[:, None], box[None, :, 2], box[None, :, 3])
+    land = a["w0"] + lu[..., None] * a["wall_u"] + lv[..., None] * a["wall_v"]
+    size2 = jnp.take(a[f"a{leg}"], idx, mode="clip")[None]
+    ratio2 = h[:, None] ** 2 / size2
+    rho2 = ((fu[:, None] - lu) ** 2 + (fv[:, None] - lv) ** 2) / size2
+    return land, jnp.where(use, 1.0 / ((1.0 + ratio2 * ratio2) * (1.0 + rho2)), 0.0)
+
+
+def _near_path(a, leg: str, x, near, path):
+    """Path lengths (M, N) with near pairs moved towards their near point (share-weighted mean)."""
+    idx = near[0]
+    land, share = _near_point(a, leg, x, near)
+    q = land - a["lidar"][0]
+    at_land = jnp.sqrt(jnp.sum(q * q, -1)) + jnp.sqrt(jnp.sum((land - x[:, None]) ** 2, -1))
+    old = jnp.take(path, idx, axis=1, mode="clip")
+    return path.at[:, idx].set(share * at_land + (1.0 - share) * old, mode="drop")
 
 
 def _retro_near(st, a, p, x, near, grid, bw, t0):
-    """Retro returns of the near-wall pairs' landing share (see :func:`_landing_share`): (Zobj, n_r).
+    """Retro returns of the near-wall pairs' share that lands under the object: (Zobj, n_r).
 
-    A sample close to the wall compared with a cell is lit mostly by the part
-    of the cell under it and sends its retroreflected light straight back
-    there, not to the cell's centre: the landing point is the sample's foot
-    on the wall clamped into the cell, seen by the zone that contains it (the
+    The retroreflected light goes straight back to where it came from: the
+    pair's near point (see :func:`_near_point`), seen by its cell's zone (the
     lobe, ``h sigma`` wide, is a point at this range), with ``s cos / r^2``.
     """
     idx, use, exact = near
-    exact = exact * _landing_share(a, x, near)
+    land, share = _near_point(a, "1", x, near)
     lid = a["lidar"]  # rows: position, right, up, forward
-    h = (x - a["w0"]) @ a["n_w"]
-    foot = x - h[:, None] * a["n_w"][None]
-    fu, fv = (foot - a["w0"]) @ a["wall_u"], (foot - a["w0"]) @ a["wall_v"]
-    box = jnp.take(a["box1"], idx, axis=0, mode="clip")  # (K, 4): u min, u max, v min, v max
-    lu = jnp.clip(fu[:, None], box[None, :, 0], box[None, :, 1])
-    lv = jnp.clip(fv[:, None], box[None, :, 2], box[None, :, 3])
-    land = a["w0"] + lu[..., None] * a["wall_u"] + lv[..., None] * a["wall_v"]  # (M, K, 3)
     q = land - lid[0]
     r = jnp.sqrt(jnp.sum(q * q, -1))
     fwd = jnp.maximum(q @ lid[3], 0.0)
@@ -124,7 +140,7 @@ def _retro_near(st, a, p, x, near, grid, bw, t0):
     zrow = jnp.take(a["cell_row"], idx, mode="clip")[None]
     ok = use & (zrow >= 0)
     recv = a["wall_rho_pi"] * (fwd / r) ** a["sens_power"] * jnp.maximum(-(q @ a["n_w"]), 0.0) / (r * r * r)
-    w = jnp.take(a["l1"], idx, mode="clip")[None] * exact * (p["albedo"] * p["areas"][:, None]) * recv
+    w = jnp.take(a["l1"], idx, mode="clip")[None] * exact * share * (p["albedo"] * p["areas"][:, None]) * recv
     dl = jnp.sqrt(jnp.sum((land - x[:, None]) ** 2, -1))
     pos = grid.node_position(2.0 * (r + dl) / C_M_PER_PS, bw, t0) - a["k_r0"]
     rows = jnp.broadcast_to(jnp.maximum(zrow, 0), w.shape)
@@ -160,7 +176,7 @@ def _retro(st, a, p, grid, bw, t0):
     c, dist, near = _coupling(a, p, "1", x, n, st.near1)
     w = a["l1"][None] * c * (p["albedo"] * p["areas"][:, None]) * a["recv"][None]
     if near is not None:  # near-wall pairs land (in part) under the object, see _retro_near
-        share = jnp.zeros_like(w).at[:, near[0]].add(_landing_share(a, x, near), mode="drop")
+        share = jnp.zeros_like(w).at[:, near[0]].add(_near_point(a, "1", x, near)[1], mode="drop")
         w = w * (1.0 - share)
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
@@ -181,13 +197,19 @@ def _lambertian(st, a, p, grid, bw, t0):
     x, n = _pose(p)
     m = x.shape[0]
     delta = bw / grid.oversample
-    c1, d1, _ = _coupling(a, p, "1", x, n, st.near1)
-    t1 = (a["r1"][None] + d1) / C_M_PER_PS
+    c1, d1, near1 = _coupling(a, p, "1", x, n, st.near1)
+    path1 = a["r1"][None] + d1
+    if near1 is not None:
+        path1 = _near_path(a, "1", x, near1, path1)
+    t1 = path1 / C_M_PER_PS
     rows1 = jnp.broadcast_to(jnp.arange(m)[:, None], c1.shape)
     leg1 = deposit_at((t1 - t0) / delta - 0.5 - a["j1"], a["l1"][None] * c1, rows1, m, st.n1)
-    c2, d2, _ = _coupling(a, p, "2", x, n, st.near2)
+    c2, d2, near2 = _coupling(a, p, "2", x, n, st.near2)
     w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * p["areas"][:, None]
-    t2 = (d2 + a["r2"][None]) / C_M_PER_PS
+    path2 = d2 + a["r2"][None]
+    if near2 is not None:
+        path2 = _near_path(a, "2", x, near2, path2)
+    t2 = path2 / C_M_PER_PS
     rows2 = jnp.arange(m)[:, None] * st.n_rows + a["row2"][None]
     leg2 = deposit_at(t2 / delta - a["j2"], w2, rows2, m * st.n_rows, st.n2).reshape(m, st.n_rows, st.n2)
     f1 = jnp.fft.rfft(leg1, st.fft_len, axis=-1)
@@ -216,6 +238,66 @@ def object_nodes(static, arrays, scene_p, bw, t0):
     return total
 
 
+def sensor_terms(static, arrays, sensor_p) -> dict:
+    """What a sensor adds independently of the hidden objects (shared by every scene of a batch).
+
+    Returns
+    -------
+    dict
+        ``sp`` (the sensor fields as arrays), ``to_bins`` (node -> bin map
+        of the impulse response), ``direct`` and ``crosstalk`` (photons per
+        iteration per bin, ``(Z, n_bins)``; the direct part already scaled by
+        the photon scale).
+    """
+    grid = static.grid
+    dtype = arrays["direct_w"].dtype
+    sp = {k: jnp.asarray(v, dtype) for k, v in sensor_p.items()}
+    bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
+    z = static.n_zones
+    if static.irf == "none":
+        to_bins = lambda nodes: bin_nodes_without_irf(grid, nodes)  # noqa: E731
+    else:
+        sigma = gaussian_sigma(sp["pulse_fwhm_ps"], sp["jitter_fwhm_ps"]) if static.irf == "full" else jnp.zeros((), dtype)
+        pulse = None
+        if static.pulse is not None:
+            pulse = (jnp.asarray(static.pulse[0], dtype), static.pulse[1], jnp.asarray(static.pulse[2], dtype))
+        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=sigma, pulse=pulse, extent_ps=static.extent,
+                         nominal_bin_width_ps=static.nominal_bin_width)
+        to_bins = lambda nodes: nodes @ mat  # noqa: E731
+    zero = jnp.zeros((z, static.grid.n_bins), dtype)
+    direct = xt = zero
+    if static.direct:
+        nodes = deposit(grid, arrays["direct_path"] / C_M_PER_PS, arrays["direct_w"], arrays["direct_row"], z,
+                        bin_width_ps=bw, start_offset_ps=t0)
+        direct = sp["photon_scale"] * to_bins(nodes)
+    if static.crosstalk:
+        nodes = deposit(grid, jnp.zeros((z,), dtype), jnp.broadcast_to(sp["crosstalk"], (z,)), jnp.arange(z), z,
+                        bin_width_ps=bw, start_offset_ps=t0)
+        xt = to_bins(nodes)
+    return {"sp": sp, "to_bins": to_bins, "direct": direct, "crosstalk": xt}
+
+
+def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
+    """Expected counts of one scene given its sensor's :func:`sensor_terms` (see :func:`forward`)."""
+    sp, to_bins = terms["sp"], terms["to_bins"]
+    dtype = arrays["direct_w"].dtype
+    bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
+    obj = jnp.zeros_like(terms["direct"])
+    if static.objects:
+        obj = sp["photon_scale"] * to_bins(object_nodes(static, arrays, scene_p, bw, t0))
+    lam = terms["direct"] + obj + terms["crosstalk"]
+    rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
+        sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
+    bg = jnp.asarray(rate, dtype) * bw * 1e-12
+    counts = counts_from_rates(lam, iterations=sp["iterations"], background_per_bin=bg, pileup=static.pileup,
+                               max_count=MAX_COUNT_24BIT if static.saturation else None)
+    if not parts:
+        return counts
+    it = sp["iterations"]
+    return counts, {"direct": it * terms["direct"], "object": it * obj,
+                    "background": jnp.broadcast_to(it * bg, counts.shape), "crosstalk": it * terms["crosstalk"]}
+
+
 def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
     """Expected counts of one scene seen by one sensor.
 
@@ -237,45 +319,10 @@ def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
     counts : array, shape (Z, n_bins)
     parts : dict of arrays, shape (Z, n_bins) (only if ``parts``)
         ``direct``, ``object``, ``background`` (ambient + dark), ``crosstalk``.
+
+    Notes
+    -----
+    ``sensor_terms`` (impulse-response matrix, first bounce, crosstalk)
+    then ``scene_counts`` (the objects); a batch computes the first once.
     """
-    grid = static.grid
-    dtype = arrays["direct_w"].dtype
-    sp = {k: jnp.asarray(v, dtype) for k, v in sensor_p.items()}
-    bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
-    z = static.n_zones
-    zero = jnp.zeros((z, grid.n_nodes), dtype)
-    direct = zero
-    if static.direct:
-        direct = deposit(grid, arrays["direct_path"] / C_M_PER_PS, arrays["direct_w"], arrays["direct_row"], z,
-                         bin_width_ps=bw, start_offset_ps=t0)
-    obj = object_nodes(static, arrays, scene_p, bw, t0) if static.objects else zero
-    xt = zero
-    if static.crosstalk:
-        xt = deposit(grid, jnp.zeros((z,), dtype), jnp.broadcast_to(sp["crosstalk"], (z,)), jnp.arange(z), z,
-                     bin_width_ps=bw, start_offset_ps=t0)
-    if static.irf == "none":
-        to_bins = lambda nodes: bin_nodes_without_irf(grid, nodes)  # noqa: E731
-    else:
-        sigma = gaussian_sigma(sp["pulse_fwhm_ps"], sp["jitter_fwhm_ps"]) if static.irf == "full" else jnp.zeros((), dtype)
-        pulse = None
-        if static.pulse is not None:
-            pulse = (jnp.asarray(static.pulse[0], dtype), static.pulse[1], jnp.asarray(static.pulse[2], dtype))
-        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=sigma, pulse=pulse, extent_ps=static.extent,
-                         nominal_bin_width_ps=static.nominal_bin_width)
-        to_bins = lambda nodes: nodes @ mat  # noqa: E731
-    scale = sp["photon_scale"]
-    lam = to_bins(scale * (direct + obj) + xt)
-    rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
-        sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
-    bg = jnp.asarray(rate, dtype) * bw * 1e-12
-    counts = counts_from_rates(lam, iterations=sp["iterations"], background_per_bin=bg, pileup=static.pileup,
-                               max_count=MAX_COUNT_24BIT if static.saturation else None)
-    if not parts:
-        return counts
-    it = sp["iterations"]
-    return counts, {
-        "direct": it * scale * to_bins(direct),
-        "object": it * scale * to_bins(obj),
-        "background": jnp.broadcast_to(it * bg, counts.shape),
-        "crosstalk": it * to_bins(xt),
-    }
+    return scene_counts(static, arrays, scene_p, sensor_terms(static, arrays, sensor_p), parts)
