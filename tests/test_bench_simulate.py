@@ -139,8 +139,8 @@ def test_arguments_and_user_errors():
     args = _parser().parse_args([])
     assert args.levels == list(bench.DEFAULT_LEVELS) and args.positions == 100 and args.repeats == 3
     assert args.plot == "nlosplan-out/bench_simulate.png" and not args.json
-    assert cli_bench.reference_positions_for(100, None) == (0, 19, 45, 77, 99)
-    assert cli_bench.reference_positions_for(30, None) == (0, 19)
+    assert cli_bench.reference_positions_for(100, None) == (0, 21, 47, 73, 99)
+    assert cli_bench.reference_positions_for(30, None) == (0, 21)
     assert cli_bench.reference_positions_for(30, [5, 7]) == (5, 7)
     for bad in (["--levels", "reference"], ["--levels", "ultra"], ["--positions", "0"], ["--positions", "101"],
                 ["--reference-positions", "a,b"], ["--repeats", "0"]):
@@ -159,9 +159,14 @@ def test_flop_estimate_counts_every_path():
     from nlosplan.simulators.fast.plan import build_plan
     from nlosplan.simulators.presets.denali import denali_scene
 
+    from nlosplan.simulators.presets.corner import corner_scene
+
     plan = build_plan(denali_scene("A", "8in", 19), preset("tmf8828-3x3-short"), "draft")
     est = bench_metrics.flop_estimate(plan)
     # every path (first bounce or three-bounce) costs at least a deposit and its time
     assert est["paths"] >= plan.paths * (4 + bench_metrics.FLOPS_DEPOSIT)
-    assert est["near_field"] > 0 and est["node_matmuls"] > 0
+    assert est["near_field"] == 0 and est["node_matmuls"] > 0  # DENALI's objects are far from the wall
     assert est["flops"] == pytest.approx(sum(v for k, v in est.items() if k != "flops"))
+    near = bench_metrics.flop_estimate(build_plan(corner_scene(object_xy=(0.3, 0.01)), preset("tmf8828-3x3-short"),
+                                                  "draft"))
+    assert near["near_field"] > 0  # an object 1 cm from the wall takes the exact form factor

@@ -10,7 +10,9 @@ from nlosplan.cli.common import Parser, emit, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.simulators.fast.bench import (
     DEFAULT_LEVELS,
+    DEFAULT_OBJECTS,
     DEFAULT_PLOT,
+    DEFAULT_SIZES,
     DEFAULT_REFERENCE_POSITIONS,
     Progress,
     _check_levels,
@@ -41,6 +43,13 @@ def _int_list(text: str) -> list[int]:
     return out
 
 
+def _name_list(text: str) -> list[str]:
+    out = [v.strip() for v in text.split(",") if v.strip()]
+    if not out:
+        raise argparse.ArgumentTypeError("give at least one name")
+    return out
+
+
 def _level_list(text: str) -> list[str]:
     out = [v.strip() for v in text.split(",") if v.strip()]
     try:
@@ -50,41 +59,40 @@ def _level_list(text: str) -> list[str]:
     return out
 
 
-def _n_positions(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 1 <= n <= N_POSITIONS:
-        raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: 1 to {N_POSITIONS}")
-    return n
+def _int_in(lo: int, hi: int | None = None):
+    """An argparse type: an integer from ``lo`` to ``hi`` (no upper bound when None)."""
 
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if n < lo or (hi is not None and n > hi):
+            raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: {lo} to {hi}" if hi is not None
+                                             else f"{n} must be >= {lo}")
+        return n
 
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{n} must be >= 1")
-    return n
+    return parse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the options of ``nlosplan bench simulate`` to ``parser``."""
     parser.add_argument("--levels", type=_level_list, default=list(DEFAULT_LEVELS),
                         help=f"comma-separated fidelity levels (default: {','.join(DEFAULT_LEVELS)})")
-    parser.add_argument("--positions", type=_n_positions, default=N_POSITIONS, metavar="N",
+    parser.add_argument("--positions", type=_int_in(1, N_POSITIONS), default=N_POSITIONS, metavar="N",
                         help=f"batch over the first N of the {N_POSITIONS} DENALI positions (default: %(default)s)")
     parser.add_argument("--reference-positions", type=_int_list, default=None, metavar="P,P,...",
                         help="positions of the float64 reference (~10-20 s each; default: "
                              f"{','.join(map(str, DEFAULT_REFERENCE_POSITIONS))}, those among the first N)")
-    parser.add_argument("--object", default="A", help="DENALI object (default: %(default)s)")
-    parser.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: %(default)s)")
+    parser.add_argument("--objects", type=_name_list, default=list(DEFAULT_OBJECTS), metavar="A,S,...",
+                        help="DENALI objects of the mixed batch; position p holds object p mod their number "
+                             f"(default: {','.join(DEFAULT_OBJECTS)})")
+    parser.add_argument("--sizes", type=_name_list, default=list(DEFAULT_SIZES), metavar="8in,4in",
+                        help=f"sizes, changing every len(objects) positions (default: {','.join(DEFAULT_SIZES)})")
     parser.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"],
                         help="precision of the timed levels (default: %(default)s; the reference is float64)")
-    parser.add_argument("--repeats", type=_positive, default=3, help="timed calls per figure, best kept (default: 3)")
+    parser.add_argument("--repeats", type=_int_in(1), default=3, help="timed calls per figure, best kept (default: 3)")
     parser.add_argument("--plot", default=DEFAULT_PLOT, help="error-against-run-time PNG ('' for none; default: %(default)s)")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser
@@ -120,7 +128,7 @@ def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **
     positions = range(args.positions)
     result = bench_simulate(levels=tuple(args.levels), positions=positions,
                             reference_positions=reference_positions_for(args.positions, args.reference_positions),
-                            obj=args.object, size=args.size, sensor=args.sensor, dtype=args.dtype,
+                            objects=tuple(args.objects), sizes=tuple(args.sizes), sensor=args.sensor, dtype=args.dtype,
                             repeats=args.repeats, progress=progress, **options)
     from nlosplan.reports.bench_text import format_bench_simulate
 
@@ -131,7 +139,7 @@ def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **
         cfg = result["config"]
         path = plot_error_runtime(
             result["levels"], args.plot,
-            title=f"fast simulator: DENALI {cfg['object']}_{cfg['size']}, {cfg['zones']}x{cfg['n_bins']}, {cfg['dtype']}",
+            title=f"fast simulator: DENALI mixed objects, {cfg['zones']}x{cfg['n_bins']}, {cfg['dtype']}",
             reference_self_error=result["reference"]["reference_self_error"])
         result["plot"] = str(path)
         text += f"\nplot: {path}"

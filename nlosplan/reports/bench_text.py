@@ -46,11 +46,13 @@ def format_bench_simulate(result: dict) -> str:
         "centroid shift bins": r["centroid_shift_bins"],
     } for r in result["levels"]]
     cfg, ref, pr, ar, mc = (result[k] for k in ("config", "reference", "pruning", "arithmetic", "machine"))
+    refs = ", ".join(f"{p} ({cfg['scenes'][str(p)]})" for p in cfg["reference_positions"])
     lines = [
-        f"fast simulator, DENALI {cfg['object']}_{cfg['size']} ({cfg['sensor']}, {cfg['zones']}x{cfg['n_bins']}, "
+        f"fast simulator, DENALI {', '.join(cfg['objects'])} x {', '.join(cfg['sizes'])} ({cfg['sensor']}, "
+        f"{cfg['zones']}x{cfg['n_bins']}, "
         f"lights {cfg['lights']}, {cfg['dtype']}): batched over {len(cfg['positions'])} positions, single at "
         f"position {cfg['single_position']}; error of the three-bounce histogram against the reference at positions "
-        f"{', '.join(str(p) for p in cfg['reference_positions'])} (worst position)",
+        f"{refs} (worst one)",
         "",
         format_table(table, floatfmt="{:.4g}"),
         "",

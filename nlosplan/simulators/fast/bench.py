@@ -62,7 +62,11 @@ TARGET_SCENES_PER_SECOND = 200.0
 STRETCH_SCENES_PER_SECOND = 1000.0
 #: Default levels, reference positions and plot path.
 DEFAULT_LEVELS = ("draft", "low", "default", "high")
-DEFAULT_REFERENCE_POSITIONS = (0, 19, 45, 77, 99)
+#: A mixed batch: five objects of every class (letters, shapes, digits) and both sizes; the reference
+#: positions hold A_8in, S_8in, circle_4in, 3_8in and minus_4in.
+DEFAULT_OBJECTS = ("A", "S", "circle", "3", "minus")
+DEFAULT_SIZES = ("8in", "4in")
+DEFAULT_REFERENCE_POSITIONS = (0, 21, 47, 73, 99)
 DEFAULT_PLOT = "nlosplan-out/bench_simulate.png"
 #: The level whose pruning and arithmetic are studied.
 STUDY_LEVEL = "default"
@@ -121,8 +125,8 @@ def bench_simulate(
     levels: Sequence[str] = DEFAULT_LEVELS,
     positions: Iterable[int] = range(N_POSITIONS),
     reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS,
-    obj: str = "A",
-    size: str = "8in",
+    objects: Sequence[str] = DEFAULT_OBJECTS,
+    sizes: Sequence[str] = DEFAULT_SIZES,
     sensor: str | SensorConfig = "tmf8828-3x3-short",
     dtype: str = "float32",
     repeats: int = 3,
@@ -142,8 +146,10 @@ def bench_simulate(
     reference_positions : sequence of int
         Positions (among ``positions``) where the error is measured against
         the float64 ``reference`` level (about 10-20 s each on a CPU).
-    obj, size : str
-        DENALI object and size.
+    objects, sizes : sequence of str
+        DENALI objects and sizes of the batch: position ``p`` holds
+        ``objects[p % len(objects)]`` at ``sizes[(p // len(objects)) % len(sizes)]``
+        (one mixed batch, as a dataset builder runs it).
     sensor : str or SensorConfig
         Preset name, sensor file, or configuration.
     dtype : {"float32", "float64"}
@@ -188,7 +194,8 @@ def bench_simulate(
     machine = machine_facts()
     t_start = time.perf_counter()
 
-    scenes = [denali_scene(obj, size, p) for p in positions]
+    objects, sizes = tuple(objects), tuple(sizes)
+    scenes = [_scene(objects, sizes, p) for p in positions]
     index = {p: i for i, p in enumerate(positions)}
     single_position = reference_positions[0]
     rows: list[dict] = []
@@ -225,7 +232,7 @@ def bench_simulate(
                    errors_per_position=err["per_position"])
     reference.pop("_ref")
 
-    pruning, study_sim = _pruning(obj, size, positions, sensor_cfg, study_level, dtype, repeats, min_seconds, say)
+    pruning, study_sim = _pruning(objects, sizes, positions, sensor_cfg, study_level, dtype, repeats, min_seconds, say)
     say("arithmetic: flop count and float32 matmul peak")
     arithmetic = _arithmetic(study_sim, pruning["prune_seconds"], repeats, matmul_n, min_seconds)
     machine["load_average_end"] = load_average()
@@ -236,7 +243,10 @@ def bench_simulate(
         "arithmetic": arithmetic,
         "machine": machine,
         "config": {
-            "preset": "denali", "object": obj, "size": size, "sensor": sensor_cfg.name, "dtype": str(dtype),
+            "preset": "denali", "objects": list(objects), "sizes": list(sizes),
+            "scenes": {str(p): f"{sc.meta['object']}_{sc.meta['size']}" for p, sc in zip(positions, scenes)
+                       if p in reference_positions},
+            "sensor": sensor_cfg.name, "dtype": str(dtype),
             "zones": f"{sensor_cfg.zones_rows}x{sensor_cfg.zones_cols}", "n_bins": sensor_cfg.n_bins,
             "lights": "off", "positions": list(positions), "reference_positions": list(reference_positions),
             "single_position": single_position, "repeats": int(repeats), "min_seconds": float(min_seconds),
@@ -277,13 +287,19 @@ def _reference(scenes, index, reference_positions, sensor, say) -> dict:
     }
 
 
-def _pruning(obj, size, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:
+def _scene(objects: Sequence[str], sizes: Sequence[str], position: int, lights: str = "off"):
+    """The benchmark's scene at a gantry position: objects cycle, sizes change every len(objects) positions."""
+    n = len(objects)
+    return denali_scene(objects[position % n], sizes[(position // n) % len(sizes)], position, lights=lights)
+
+
+def _pruning(objects, sizes, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:
     """Pruned against full plans, the centre zone against all, lights off against on (batched).
 
     The pruned run has the same plan as the level's batched run, so its compiled code is reused.
     """
-    off = [denali_scene(obj, size, p, lights="off") for p in positions]
-    on = [denali_scene(obj, size, p, lights="on") for p in positions]
+    off = [_scene(objects, sizes, p, "off") for p in positions]
+    on = [_scene(objects, sizes, p, "on") for p in positions]
     n = len(positions)
     rc, cc = sensor.zones_rows // 2, sensor.zones_cols // 2
     kw = dict(fidelity=level, dtype=dtype)
