@@ -337,7 +337,7 @@ def plan_object(
                   (f"object {h_min * 1000:.1f} mm from the wall: up to {n_near['1'] + n_near['2']} wall cells per "
                    f"scene it can come within {NEAR_CELLS:g} cell sizes of use the exact polygon form factor" if near
                    else f"object >= {h_min * 100:.1f} cm from the wall, beyond {NEAR_CELLS:g} cell sizes of every "
-                   "cell: midpoint kernel within 0.5 %")))
+                   f"cell: midpoint kernel (at most {100 / (3 * NEAR_CELLS**2):.1f} % per cell, far less in total)")))
     # near points: cell boxes in wall coordinates, the wall's axes and the LiDAR
     for leg, cells in (("1", flash),) if retro else (("1", flash), ("2", det)):
         wall_uv = np.stack([(cells.corners - scene.wall.center) @ scene.wall.u_axis,
