@@ -48,8 +48,8 @@ def test_denali_is_the_default_and_writes_every_array(denali):
     assert counts.shape == bg_counts.shape == (2, 3, 3, 128)
     assert counts.dtype == bg_counts.dtype == np.int64 and counts.min() >= 0 and bg_counts.min() >= 0
     np.testing.assert_array_equal(signal, expected - background)
-    # the object adds light late in the window, never removes any
-    assert signal.min() >= 0 and signal.sum() > 0
+    # the object adds light late in the window, never removes any (beyond float32 rounding of the direct peak)
+    assert signal.min() >= -4 * np.finfo(np.float32).eps * expected.max() and signal.sum() > 0
     assert signal[..., :64].sum() < 1e-3 * signal.sum()
     png = d / "h.png"
     assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 20_000
