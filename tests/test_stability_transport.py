@@ -8,11 +8,6 @@ from nlosplan.simulators.fast import plan_object
 from nlosplan.simulators.fast import stability_cases as sc
 from nlosplan.stability import all_cases, run_cases
 
-#: Cases that fail because of a known simulator defect: {name: reason}. Strict xfail, so a fix shows up.
-#: (object-1mm-retro failed until the transport held the retro lobe's grazing stretch at GRAZING_SIGMAS.)
-KNOWN_FAILURES: dict[str, str] = {}
-
-
 @pytest.fixture
 def fresh_cache():
     """Empty the case module's simulator caches before and after (monkeypatched code must be re-planned)."""
@@ -21,16 +16,7 @@ def fresh_cache():
     sc.clear_caches()
 
 
-def _params():
-    out = []
-    for case in sc.CASES:
-        known = case.name in KNOWN_FAILURES
-        marks = [pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=True)] if known else []
-        out.append(pytest.param(case, id=case.name, marks=marks))
-    return out
-
-
-@pytest.mark.parametrize("case", _params())
+@pytest.mark.parametrize("case", sc.CASES, ids=[c.name for c in sc.CASES])
 def test_case_passes(case):
     (res,) = run_cases([case])
     assert res.passed, f"{res.name}: {res.detail}"
