@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from nlosplan.reports.figures import pyplot, save_figure
+
 #: Errors below this (relative) are drawn at it on the log axis.
 ERROR_FLOOR = 1e-6
 
@@ -45,10 +47,7 @@ def plot_error_runtime(
     Path
         The written file.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(7.2, 5.0))
     pts_err, pts_t = [], []
@@ -101,9 +100,4 @@ def plot_error_runtime(
     ax.legend(fontsize=8, loc="upper right")
     if title:
         ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120, tight=True)

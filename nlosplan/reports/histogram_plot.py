@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nlosplan.reports.figures import pyplot, save_figure
+
 
 def plot_zone_histograms(
     histogram: np.ndarray,
@@ -39,10 +41,7 @@ def plot_zone_histograms(
     Path
         The written file.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     h = np.asarray(histogram, dtype=float)
     rows, cols, n = h.shape
@@ -68,9 +67,4 @@ def plot_zone_histograms(
     axes[0, 0].legend(fontsize=6, loc="upper right")
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110, tight=True)

@@ -9,6 +9,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from nlosplan.reports.figures import pyplot, save_figure
+
 # colour-blind-safe (Okabe-Ito) colours, one per curve
 _COLORS = {
     "capture": "0.72",
@@ -182,10 +184,7 @@ def plot_simulation(
     ValueError
         Arrays of different shapes, or a missing part.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     exp = np.asarray(expected, dtype=float)
     if exp.ndim not in (2, 3):
@@ -221,11 +220,7 @@ def plot_simulation(
                frameon=False, borderaxespad=0.3)
     if title:
         fig.suptitle(title, fontsize=10, y=1 - 0.08 / lay.size[1], va="top")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def _label_edges(axes, twins, rows, cols, small) -> None:
