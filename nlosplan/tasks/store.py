@@ -1,0 +1,355 @@
+"""`CaptureStore`: simulated and real captures in one SQLite file (WAL mode).
+
+One row per capture: its labels (the :data:`~nlosplan.tasks.dataset.LABEL_COLUMNS`),
+its metadata and its histogram as raw little-endian bytes. The rig, the
+simulated-dataset builder and the DENALI importer all write here; the models
+read :class:`~nlosplan.tasks.dataset.Dataset` objects back with :meth:`CaptureStore.load`.
+
+Crash safety
+------------
+The file is in WAL mode and every capture is committed in its own
+transaction, so a writer killed at any moment (SIGKILL, a crash) leaves a
+consistent file: every capture whose commit returned, complete, and the
+capture in flight either complete or absent.
+``synchronous=FULL`` (the default) also makes every returned commit survive a
+power cut or OS crash: the WAL is fsynced per commit, which the rig needs
+because it moves on once a capture is stored. ``synchronous="NORMAL"`` is as
+safe against process crashes and never corrupts the file, but a power cut may
+undo the last commits; it suits simulated builds, which regenerate identical
+captures on resume. Measured with :meth:`CaptureStore.put_many` (3x3x128
+int64 captures, one transaction each, a shared 2-core VM with a virtio disk):
+650-1,400 captures/s with FULL, 3,400-7,300 captures/s with NORMAL;
+:meth:`CaptureStore.load` reads about 60,000 captures/s.
+
+Keys
+----
+A capture's unique key joins object, size, position, lights, zones, repeat,
+source, the sensor hash (:func:`sensor_hash`, the physics fields of the
+sensor), the seed, the variant (a hash of a simulation's scene options and
+fidelity) and the capture id, so adding the same capture twice is detected
+and interrupted writers can resume (:meth:`CaptureStore.keys`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sqlite3
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+import pandas as pd
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.tasks.dataset import LABEL_COLUMNS, Dataset
+from nlosplan.tasks.records import (
+    APPLICATION_ID,
+    DTYPES,
+    FILTER_COLUMNS,
+    INSERT_COLUMNS,
+    SCHEMA,
+    SCHEMA_VERSION,
+    Added,
+    Capture,
+    capture_key,
+    capture_row,
+    describe,
+    sensor_hash,
+    sensor_row,
+    where_sql,
+)
+
+__all__ = ["Added", "Capture", "CaptureStore", "SCHEMA_VERSION", "capture_key", "sensor_hash"]
+
+
+class CaptureStore:
+    """Captures with labels and metadata in an SQLite file (created when missing).
+
+    Parameters
+    ----------
+    path : str or Path
+        The store file; parent folders are created.
+    create : bool
+        Create a new store when ``path`` does not exist (else a UserError).
+    synchronous : {"FULL", "NORMAL"}
+        SQLite durability per commit (see the module notes): FULL survives
+        power cuts, NORMAL only process crashes (and is ~20x faster).
+    timeout : float
+        Seconds to wait for another writer's lock.
+
+    Raises
+    ------
+    UserError
+        The file is not an nlosplan store, is newer than this code, or
+        cannot be opened.
+
+    Examples
+    --------
+    >>> with CaptureStore("captures.sqlite") as store:  # doctest: +SKIP
+    ...     store.put(counts, dict(object="A", size="8in", position=19, lights="off", repeat=0,
+    ...                            source="real:rig"), sensor=preset("tmf8828-3x3-short"))
+    ...     ds = store.load(lights="off")
+    """
+
+    def __init__(self, path, *, create: bool = True, synchronous: str = "FULL", timeout: float = 30.0):
+        self.path = Path(path)
+        if str(synchronous).upper() not in ("FULL", "NORMAL"):
+            raise UserError(f"synchronous={synchronous!r} is not allowed; allowed: FULL, NORMAL")
+        if self.path.is_dir():
+            raise UserError(f"capture store {self.path} is a folder; give a file path such as "
+                            f"{self.path / 'captures.sqlite'}")
+        if not self.path.exists():
+            if not create:
+                raise UserError(f"capture store {self.path} does not exist")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._sensors: dict[str, SensorConfig] = {}
+        try:
+            self._db = sqlite3.connect(str(self.path), timeout=timeout, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise UserError(f"cannot open capture store {self.path}: {exc}") from None
+        try:
+            self._open(str(synchronous).upper())
+        except sqlite3.OperationalError as exc:  # locked, no permission, disk I/O
+            self._db.close()
+            raise UserError(f"cannot open capture store {self.path}: {exc}") from None
+        except sqlite3.DatabaseError as exc:  # "file is not a database"
+            self._db.close()
+            raise UserError(f"{self.path} is not an nlosplan capture store ({exc})") from None
+        except UserError:
+            self._db.close()
+            raise
+
+    def _open(self, synchronous: str) -> None:
+        db = self._db
+        app = db.execute("PRAGMA application_id").fetchone()[0]
+        version = db.execute("PRAGMA user_version").fetchone()[0]
+        n_tables = db.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+        if app != APPLICATION_ID and (app != 0 or n_tables):
+            raise UserError(f"{self.path} is an SQLite file but not an nlosplan capture store; choose another path")
+        if app == APPLICATION_ID and version > SCHEMA_VERSION:
+            raise UserError(f"capture store {self.path} has schema version {version}, newer than this nlosplan "
+                            f"({SCHEMA_VERSION}); upgrade nlosplan")
+        if db.execute("PRAGMA journal_mode=WAL").fetchone()[0].lower() != "wal":
+            raise UserError(f"capture store {self.path}: the file system does not support SQLite WAL mode")
+        db.execute(f"PRAGMA synchronous={synchronous}")
+        db.execute("PRAGMA foreign_keys=ON")
+        if app == 0:
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                if db.execute("PRAGMA application_id").fetchone()[0] == 0:  # not created meanwhile by another process
+                    for statement in SCHEMA.split(";"):
+                        if statement.strip():
+                            db.execute(statement)
+                db.execute("COMMIT")
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+
+    # ------------------------------------------------------------ lifecycle
+    def close(self) -> None:
+        """Close the file (idempotent)."""
+        if self._db is not None:
+            self._db.close()
+            self._db = None
+
+    def __enter__(self) -> "CaptureStore":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _conn(self) -> sqlite3.Connection:
+        if self._db is None:
+            raise UserError(f"capture store {self.path} is closed")
+        return self._db
+
+    def integrity_check(self) -> str:
+        """SQLite's ``PRAGMA integrity_check`` result (``"ok"`` for a sound file)."""
+        return "; ".join(r[0] for r in self._conn().execute("PRAGMA integrity_check"))
+
+    # ------------------------------------------------------------ writing
+    _INSERT = (f"INSERT INTO captures ({', '.join(INSERT_COLUMNS)}) VALUES ({', '.join('?' * len(INSERT_COLUMNS))}) "
+               "ON CONFLICT (key) DO NOTHING")
+
+    def _insert(self, row: tuple, sensor_row: tuple) -> tuple[int, bool]:
+        db = self._conn()
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            db.execute("INSERT OR IGNORE INTO sensors VALUES (?, ?, ?, ?, ?, ?)", sensor_row)
+            cur = db.execute(self._INSERT, row)
+            new = cur.rowcount == 1
+            rid = cur.lastrowid if new else db.execute("SELECT id FROM captures WHERE key = ?", (row[0],)).fetchone()[0]
+            db.execute("COMMIT")
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        return int(rid), new
+
+    def put(self, hist, labels: dict, *, sensor: SensorConfig, meta: dict | None = None, exists: str = "error") -> int:
+        """Store one capture in its own transaction.
+
+        Parameters
+        ----------
+        hist : array, shape (rows, cols, bins)
+            Integer counts (stored as int64) or float expectations (stored as float32).
+        labels : dict
+            ``object``, ``size``, ``position``, ``lights`` ("on"/"off"), ``repeat``,
+            ``source``; optional ``class_group`` (derived for DENALI objects),
+            ``x``, ``y`` (metres), ``zones`` (must equal the sensor's), ``seed``,
+            ``variant``, ``capture_id``, ``scene``, ``backend``, ``fidelity``.
+        sensor : SensorConfig
+            The sensor that made it (stored once per distinct sensor).
+        meta : dict, optional
+            Free JSON metadata (e.g. commanded and reported gantry position).
+        exists : {"error", "skip"}
+            What to do when a capture with the same key is stored already.
+
+        Returns
+        -------
+        int
+            The capture's id (the stored one's with ``exists="skip"``).
+        """
+        if exists not in ("error", "skip"):
+            raise UserError(f"exists={exists!r} is not allowed; allowed: 'error', 'skip'")
+        srow = sensor_row(sensor)
+        rid, new = self._insert(capture_row(hist, labels, sensor, meta), srow)
+        if not new and exists == "error":
+            raise UserError(f"capture {capture_key(labels, sensor)} is stored already (id {rid})")
+        return rid
+
+    def put_many(self, items: Iterable, *, sensor: SensorConfig, meta: dict | None = None,
+                 exists: str = "skip") -> Added:
+        """Store captures, each in its own transaction (an interrupted call keeps every finished one).
+
+        Committing each capture costs one fsync with ``synchronous="FULL"``
+        (650-1,400 captures/s here) and none with NORMAL (3,400-7,300/s).
+
+        Parameters
+        ----------
+        items : iterable of (hist, labels) or (hist, labels, meta)
+            As :meth:`put`; a per-item ``meta`` updates the shared ``meta``.
+        sensor, exists
+            As :meth:`put` (``exists`` defaults to "skip" here).
+
+        Returns
+        -------
+        Added
+            ``ids`` of every item in order, and how many were ``added`` or ``skipped``.
+        """
+        if exists not in ("error", "skip"):
+            raise UserError(f"exists={exists!r} is not allowed; allowed: 'error', 'skip'")
+        srow = sensor_row(sensor)
+        ids, added = [], 0
+        for item in items:
+            hist, labels, extra = (*item, None) if len(item) == 2 else item
+            m = {**(meta or {}), **(extra or {})}
+            rid, new = self._insert(capture_row(hist, labels, sensor, m), srow)
+            if not new and exists == "error":
+                raise UserError(f"capture {capture_key(labels, sensor)} is stored already (id {rid})")
+            ids.append(rid)
+            added += new
+        return Added(ids, added, len(ids) - added)
+
+    # ------------------------------------------------------------ reading
+    def has(self, key: str) -> bool:
+        """Whether a capture with this key (:func:`capture_key`) is stored."""
+        return self._conn().execute("SELECT 1 FROM captures WHERE key = ?", (key,)).fetchone() is not None
+
+    def keys(self, **where) -> set[str]:
+        """Keys of the stored captures matching ``where`` (to skip them when resuming)."""
+        sql, vals = where_sql(where)
+        return {r[0] for r in self._conn().execute(f"SELECT c.key FROM captures c{sql}", vals)}
+
+    def count(self, **where) -> int:
+        """Number of captures whose columns equal the given values (lists allowed)."""
+        sql, vals = where_sql(where)
+        return int(self._conn().execute(f"SELECT count(*) FROM captures c{sql}", vals).fetchone()[0])
+
+    def sensor(self, hash_: str) -> SensorConfig:
+        """The stored sensor with this :func:`sensor_hash`."""
+        if hash_ not in self._sensors:
+            row = self._conn().execute("SELECT config FROM sensors WHERE hash = ?", (hash_,)).fetchone()
+            if row is None:
+                raise UserError(f"no sensor {hash_!r} in capture store {self.path}")
+            self._sensors[hash_] = SensorConfig.from_json(row[0])
+        return self._sensors[hash_]
+
+    def sensors(self) -> pd.DataFrame:
+        """Stored sensors: hash, name, zones, n_bins, bin_width_ps and their number of captures."""
+        q = ("SELECT s.hash, s.name, s.zones, s.n_bins, s.bin_width_ps, count(c.id) AS captures FROM sensors s "
+             "LEFT JOIN captures c ON c.sensor_hash = s.hash GROUP BY s.hash ORDER BY s.name, s.hash")
+        return pd.read_sql_query(q, self._conn())
+
+    _LABELS = ", ".join(f"c.{c}" for c in LABEL_COLUMNS + ("id", "sensor_hash", "seed", "variant", "capture_id"))
+
+    def labels(self, **where) -> pd.DataFrame:
+        """Label table (no histograms) of the matching captures, ordered by id.
+
+        Columns: :data:`LABEL_COLUMNS`, ``id``, ``sensor_hash``, ``seed``
+        (nullable integer), ``variant``, ``capture_id``; x, y are NaN when unknown.
+        """
+        sql, vals = where_sql(where)
+        df = pd.read_sql_query(f"SELECT {self._LABELS} FROM captures c{sql} ORDER BY c.id", self._conn(), params=vals)
+        df["x"], df["y"] = df["x"].astype(float), df["y"].astype(float)
+        df["seed"] = df["seed"].astype("Int64")
+        return df
+
+    def load(self, **where) -> Dataset:
+        """The matching captures as a :class:`Dataset` (histograms stacked as float32, ordered by id).
+
+        Counts up to the 24-bit register maximum are exact in float32.
+
+        Raises
+        ------
+        UserError
+            No capture matches, or the matches differ in histogram shape or bin width
+            (filter by ``zones`` or ``sensor_hash``).
+        """
+        db = self._conn()
+        sql, vals = where_sql(where)
+        db.execute("BEGIN")  # one snapshot for the three queries while writers go on
+        try:
+            labels = self.labels(**where)
+            if labels.empty:
+                raise UserError(f"no captures in {self.path} match {describe(where)}")
+            q = f"SELECT DISTINCT c.shape, s.bin_width_ps FROM captures c JOIN sensors s ON s.hash = c.sensor_hash{sql}"
+            kinds = db.execute(q, vals).fetchall()
+            if len(kinds) > 1:
+                shown = "; ".join(f"shape {json.loads(s)} at {b:g} ps" for s, b in kinds)
+                raise UserError(f"captures matching {describe(where)} mix histogram shapes or bin widths ({shown}); "
+                                "filter by zones= or sensor_hash=")
+            shape, bin_width = tuple(json.loads(kinds[0][0])), float(kinds[0][1])
+            out = np.empty((len(labels),) + shape, np.float32)
+            for i, (dtype, data) in enumerate(db.execute(f"SELECT c.dtype, c.data FROM captures c{sql} ORDER BY c.id",
+                                                         vals)):
+                out[i] = np.frombuffer(data, DTYPES[dtype]).reshape(shape)
+        finally:
+            db.execute("COMMIT")
+        return Dataset(out, labels, bin_width)
+
+    def iter_captures(self, **where) -> Iterator[Capture]:
+        """The matching captures one at a time, ordered by id (histograms in their stored dtype)."""
+        sql, vals = where_sql(where)
+        q = (f"SELECT {self._LABELS}, c.key, c.scene, c.backend, c.fidelity, c.created_utc, c.meta, c.dtype, c.shape, "
+             f"c.data FROM captures c{sql} ORDER BY c.id")
+        names = list(LABEL_COLUMNS) + ["id", "sensor_hash", "seed", "variant", "capture_id"]
+        for row in self._conn().execute(q, vals):
+            lab = dict(zip(names, row[: len(names)]))
+            key, scene, backend, fidelity, created, meta, dtype, shape, data = row[len(names):]
+            lab["x"], lab["y"] = (math.nan if v is None else v for v in (lab["x"], lab["y"]))
+            hist = np.frombuffer(data, DTYPES[dtype]).reshape(json.loads(shape)).astype(DTYPES[dtype].newbyteorder("="))
+            info = {"scene": scene, "backend": backend, "fidelity": fidelity, "created_utc": created,
+                    **json.loads(meta)}
+            yield Capture(id=lab.pop("id"), key=key, labels=lab, histogram=hist, meta=info)
+
+    def summary(self, by: tuple[str, ...] = ("source", "zones", "lights", "size")) -> pd.DataFrame:
+        """Captures counted by the ``by`` columns: objects, positions, repeats per scene and captures."""
+        bad = [c for c in by if c not in FILTER_COLUMNS]
+        if bad:
+            raise UserError(f"cannot group captures by {', '.join(bad)}; allowed: {', '.join(FILTER_COLUMNS)}")
+        cols = ", ".join(by)
+        q = (f"SELECT {cols}, count(DISTINCT object) AS objects, count(DISTINCT position) AS positions, "
+             f"max(repeat) + 1 AS repeats, count(*) AS captures FROM captures GROUP BY {cols} ORDER BY {cols}")
+        return pd.read_sql_query(q, self._conn())
