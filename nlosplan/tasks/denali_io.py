@@ -1,0 +1,362 @@
+"""The real DENALI folder layout: import it into a capture store, export a store to it.
+
+Layout (DENALI's ``DataSet.from_raw_captures``)::
+
+    <root>/<object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy
+    <root>/tag1_positions.json      {"frame{N}_tag1": [x, y, ...], ...} (metres)
+
+Each ``NNN.npy`` holds the repeats of one capture, shape ``(repeats, H, W, 128)``;
+``NNN`` is the capture number, the gantry position index. Object names are
+DENALI's: ``halfcircle`` is the mesh ``semicircle``, ``i`` is ``I``;
+``NOOBJECT`` and ``NOOBJECTMOUNT`` (the backgrounds) get class group
+``"background"``.
+
+Safety: histogram files are read with ``allow_pickle=False``; a file that
+needs pickle (an object array, a ``NNN.pkl`` or ``NNN.joblib`` capture file)
+may run code when loaded and is refused unless ``trust_pickle=True``.
+Other files are never opened (pickle files among them are listed as
+skipped in the import summary).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.simulators.presets.denali import DENALI_OBJECTS, class_group
+from nlosplan.tasks.records import capture_key, sensor_hash, zones_of
+
+__all__ = ["BACKGROUNDS", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
+
+#: ``source`` label of imported captures.
+SOURCE = "real:denali"
+#: DENALI's background captures (no object, or the bare mount).
+BACKGROUNDS = ("NOOBJECT", "NOOBJECTMOUNT")
+_FOLDER = re.compile(r"^(?P<object>.+)_(?P<size>4inch|8inch)_(?P<zones>\d+x\d+)_(?P<lights>lighton|lightoff)_NLOSdata$")
+_FILE = re.compile(r"^(?P<number>\d+)\.(?P<ext>npy|pkl|joblib)$")
+#: DENALI's data names of the objects whose mesh names differ.
+OBJECT_ALIASES = {"halfcircle": "semicircle", "i": "I"}
+_EXPORT_NAMES = {"semicircle": "halfcircle"}
+_SIZES = {"4inch": "4in", "8inch": "8in"}
+_LIGHTS = {"lighton": "on", "lightoff": "off"}
+Progress = Callable[[int, int, str], None]
+
+
+def load_positions(path=None) -> dict[int, tuple[float, float]]:
+    """Capture number -> (x, y) in metres, from a ``tag1_positions.json`` (default: the packaged DENALI one).
+
+    Keys ``frame{N}_tag1`` give capture number ``N`` (DENALI's
+    ``load_capture_number_to_location_mapping``); other keys are ignored.
+    """
+    try:
+        if path is None:
+            text = (resources.files("nlosplan.simulators") / "data" / "denali" / "tag1_positions.json").read_text()
+        else:
+            text = Path(path).read_text(encoding="utf-8")
+        raw = json.loads(text)
+        out = {}
+        for key, value in raw.items():
+            if key.startswith("frame"):
+                out[int(key.split("_", 1)[0].removeprefix("frame"))] = (float(value[0]), float(value[1]))
+        return out
+    except OSError as exc:
+        raise UserError(f"cannot read positions file {path}: {exc.strerror}") from None
+    except (ValueError, TypeError, IndexError, AttributeError) as exc:
+        raise UserError(f"positions file {path} is not a tag1_positions.json ({{'frameN_tag1': [x, y, ...]}}): "
+                        f"{str(exc).splitlines()[0]}") from None
+
+
+def _pickle_refusal(path: Path) -> UserError:
+    return UserError(f"{path}: refusing to load a file that needs pickle (it may run code when loaded); "
+                     "pass --trust-pickle (trust_pickle=True) only for data you trust")
+
+
+def _npy_header(path: Path) -> tuple[tuple, np.dtype]:
+    try:
+        fmt = np.lib.format
+        with open(path, "rb") as f:  # the header only: no data, no pickle
+            version = fmt.read_magic(f)
+            read = {(1, 0): fmt.read_array_header_1_0, (2, 0): fmt.read_array_header_2_0}.get(version)
+            if read is None:
+                raise ValueError(f".npy format version {version} is not supported")
+            shape, _, dtype = read(f)
+        return tuple(shape), dtype
+    except (OSError, ValueError, EOFError) as exc:
+        raise UserError(f"{path}: not a readable .npy file ({str(exc).splitlines()[0]})") from None
+
+
+def _read(path: Path, ext: str, trust: bool) -> np.ndarray:
+    """The array of a capture file; pickles only when trusted."""
+    try:
+        if ext == "npy":
+            return np.asarray(np.load(path, allow_pickle=trust))
+        if not trust:
+            raise _pickle_refusal(path)
+        if ext == "joblib":
+            import joblib
+
+            return np.asarray(joblib.load(path))
+        import pickle
+
+        with open(path, "rb") as f:
+            return np.asarray(pickle.load(f))
+    except UserError:
+        raise
+    except Exception as exc:  # corrupt files raise many kinds; name the file in one line
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        raise UserError(f"{path}: cannot be read ({type(exc).__name__}: {first})") from None
+
+
+def _as_counts(arr: np.ndarray, path: Path, shape: tuple) -> tuple[np.ndarray, str]:
+    """Checked histograms (repeats, *shape): int64 when the values are whole numbers, else float32."""
+    if arr.ndim != 4 or arr.shape[1:] != shape or arr.shape[0] < 1:
+        raise UserError(f"{path}: histogram shape {arr.shape}, expected (repeats, {', '.join(map(str, shape))})")
+    try:
+        values = arr.astype(np.int64) if np.issubdtype(arr.dtype, np.integer) else arr.astype(np.float64)
+    except (TypeError, ValueError):
+        raise UserError(f"{path}: histogram values of dtype {arr.dtype} are not numbers") from None
+    if not np.all(np.isfinite(values)) or values.min() < 0:
+        raise UserError(f"{path}: histogram has negative, NaN or infinite counts")
+    if values.dtype == np.float64:
+        values = values.astype(np.int64) if np.array_equal(values, np.round(values)) else values.astype(np.float32)
+    return values, str(arr.dtype)
+
+
+def _sensors(sensors) -> dict[str, SensorConfig]:
+    from nlosplan.sensor_models import preset
+
+    out = {"3x3": preset("tmf8828-3x3-short"), "8x8": preset("tmf8828-8x8-short")}
+    for s in sensors or ():
+        if not isinstance(s, SensorConfig):
+            raise UserError(f"sensors must be SensorConfig objects, not {type(s).__name__}")
+        out[zones_of(s)] = s
+    return out
+
+
+def _folder_labels(name: str) -> tuple[dict | None, str]:
+    """Labels of a capture folder, or None and why it is skipped."""
+    m = _FOLDER.match(name)
+    if m is None:
+        return None, "not <object>_<4inch|8inch>_<RxC>_<lighton|lightoff>_NLOSdata"
+    obj = OBJECT_ALIASES.get(m["object"], m["object"])
+    if obj in BACKGROUNDS:
+        group = "background"
+    elif obj in DENALI_OBJECTS:
+        group = class_group(obj)
+    else:
+        return None, f"unknown object {m['object']!r} (not one of the 30 DENALI objects, NOOBJECT or NOOBJECTMOUNT)"
+    return dict(object=obj, size=_SIZES[m["size"]], class_group=group, lights=_LIGHTS[m["lights"]],
+                zones=m["zones"]), ""
+
+
+def import_denali(root, store, *, positions_json=None, trust_pickle: bool = False, sensors=None,
+                  source: str = SOURCE, progress: Progress | None = None) -> dict:
+    """Import a DENALI data folder into a store, resumably (captures stored already are skipped).
+
+    Parameters
+    ----------
+    root : str or Path
+        The folder holding the ``*_NLOSdata`` folders.
+    store : CaptureStore
+    positions_json : str or Path, optional
+        ``tag1_positions.json`` giving (x, y) per capture number (default: the packaged DENALI one).
+    trust_pickle : bool
+        Allow capture files that need pickle (they may run code when loaded).
+    sensors : sequence of SensorConfig, optional
+        Sensors by zone mode, replacing the presets ``tmf8828-3x3-short`` and
+        ``tmf8828-8x8-short`` (their bin width becomes the dataset's).
+    source : str
+        ``source`` label of the captures.
+    progress : callable, optional
+        ``progress(done, total, text)`` per capture file.
+
+    Returns
+    -------
+    dict
+        ``folders`` imported, ``files`` read, ``files_stored_already``,
+        ``captures_added``, ``captures_skipped``, ``skipped`` (list of
+        ``{"path", "reason"}`` for folders and files left out), ``seconds``.
+
+    Raises
+    ------
+    UserError
+        ``root`` is not a folder; a capture file is corrupt, has the wrong
+        shape or negative counts, or needs pickle without ``trust_pickle``
+        (the message names the file; rerun after fixing it). Pickle and
+        unreadable ``.npy`` headers are found before anything is imported.
+    """
+    t0 = time.perf_counter()
+    root = Path(root)
+    if not root.is_dir():
+        raise UserError(f"DENALI data folder {root} does not exist or is not a folder")
+    positions = load_positions(positions_json)
+    by_zones = _sensors(sensors)
+    skipped: list[dict] = []
+    work = []
+    for f in sorted(p for p in root.iterdir() if p.is_file() and p.suffix in (".pkl", ".joblib")):
+        skipped.append({"path": f.name, "reason": "pickle file outside the folder layout; not opened"})
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        lab, why = _folder_labels(folder.name)
+        if lab is not None and lab["zones"] not in by_zones:
+            lab, why = None, f"no sensor for {lab['zones']} zones (give one with that zone mode)"
+        if lab is not None and not (folder / "spad_histogram").is_dir():
+            lab, why = None, "no spad_histogram folder"
+        if lab is None:
+            skipped.append({"path": folder.name, "reason": why})
+            continue
+        for f in sorted((folder / "spad_histogram").iterdir()):
+            m = _FILE.match(f.name)
+            rel = f"{folder.name}/spad_histogram/{f.name}"
+            if m is None or not f.is_file():
+                skipped.append({"path": rel, "reason": "not a capture file NNN.npy (or NNN.pkl, NNN.joblib)"})
+            elif int(m["number"]) not in positions:
+                skipped.append({"path": rel, "reason": f"capture number {int(m['number'])} has no position in the "
+                                                       "positions file"})
+            else:
+                header = _npy_header(f) if m["ext"] == "npy" else None
+                if not trust_pickle and (header is None or header[1].hasobject):
+                    raise _pickle_refusal(f)  # before anything is imported
+                work.append((folder, f, m["ext"], int(m["number"]), lab, header))
+    stored = store.keys(source=source)
+    files = files_stored = added = already = 0
+    if progress:
+        progress(0, len(work), "starting")
+    for i, (folder, f, ext, number, lab, header) in enumerate(work):
+        sensor = by_zones[lab["zones"]]
+        h = sensor_hash(sensor)
+        x, y = positions[number]
+        base = dict(lab, position=number, x=x, y=y, source=source)
+        if header is not None:
+            n = header[0][0] if len(header[0]) == 4 else 0
+            if n and all(capture_key(dict(base, repeat=r), h) in stored for r in range(n)):
+                files_stored += 1
+                already += n
+                if progress:
+                    progress(i + 1, len(work), f"{folder.name}: stored already")
+                continue
+        counts, src_dtype = _as_counts(_read(f, ext, trust_pickle), f, (sensor.zones_rows, sensor.zones_cols,
+                                                                          sensor.n_bins))
+        meta = {"folder": folder.name, "file": f.name, "source_dtype": src_dtype}
+        res = store.put_many(((counts[r], dict(base, repeat=r)) for r in range(len(counts))), sensor=sensor, meta=meta)
+        files, added, already = files + 1, added + res.added, already + res.skipped
+        if progress:
+            progress(i + 1, len(work), f"{folder.name}/{f.name}")
+    folders = len({w[0] for w in work})
+    return {"root": str(root), "store": str(store.path), "source": source, "folders": folders, "files": files,
+            "files_stored_already": files_stored, "captures_added": added, "captures_skipped": already,
+            "skipped": skipped, "seconds": time.perf_counter() - t0}
+
+
+def _write_npy(path: Path, arr: np.ndarray, overwrite: bool) -> bool:
+    """Write atomically; False when an equal file is there already."""
+    if path.exists():
+        try:
+            old = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError):
+            old = None
+        if old is not None and old.dtype == arr.dtype and np.array_equal(old, arr):
+            return False
+        if not overwrite:
+            raise UserError(f"{path} exists with other data; pass --overwrite (overwrite=True) to replace it")
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        np.save(f, arr, allow_pickle=False)
+    os.replace(tmp, path)
+    return True
+
+
+def export_denali(store, root, *, overwrite: bool = False, progress: Progress | None = None, **where) -> dict:
+    """Write captures in the DENALI folder layout, with a ``tag1_positions.json``.
+
+    Parameters
+    ----------
+    store : CaptureStore
+    root : str or Path
+        Output folder (created).
+    overwrite : bool
+        Replace files that hold other data (equal files are left alone).
+    progress : callable, optional
+        ``progress(done, total, text)`` per scene file.
+    **where
+        Capture filter (as :meth:`CaptureStore.load`); negative repeats
+        (means, expectations) are never exported.
+
+    Returns
+    -------
+    dict
+        ``folders``, ``files_written``, ``files_unchanged``, ``captures``, ``positions`` and ``root``.
+
+    Raises
+    ------
+    UserError
+        Nothing matches; two captures would share a file slot (filter by
+        ``source``, ``sensor_hash`` or ``seed``); a scene's repeats are not
+        0..R-1; a capture lacks x, y; labels the layout cannot name.
+    """
+    labels = store.labels(**where)
+    labels = labels[labels["repeat"] >= 0]
+    if labels.empty:
+        raise UserError(f"no captures to export match {where or 'no filter'}")
+    scene_cols = ["object", "size", "zones", "lights", "position"]
+    dup = labels.duplicated(scene_cols + ["repeat"], keep=False)
+    if dup.any():
+        row = labels[dup].iloc[0]
+        raise UserError(f"several captures of {row['object']}_{row['size']} {row['zones']} lights {row['lights']} "
+                        f"position {row['position']} repeat {row['repeat']} (sources, sensors or seeds differ); "
+                        "filter by source, sensor_hash or seed")
+    if labels[["x", "y"]].isna().any().any():
+        raise UserError("some captures have no x, y label; the DENALI layout needs a position for each")
+    bad = sorted(set(labels["object"]) - set(DENALI_OBJECTS) - set(BACKGROUNDS)) + sorted(
+        set(labels["size"]) - set(_SIZES.values()))
+    if bad:
+        raise UserError(f"the DENALI layout cannot name {', '.join(map(repr, bad))}")
+    pos = labels.groupby("position")[["x", "y"]].nunique()
+    if (pos > 1).any().any():
+        raise UserError(f"positions {sorted(pos.index[(pos > 1).any(axis=1)])} have several (x, y) labels")
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    inv_sizes, inv_lights = {v: k for k, v in _SIZES.items()}, {v: k for k, v in _LIGHTS.items()}
+    scenes = list(labels.groupby(scene_cols, sort=True))
+    written = unchanged = 0
+    folders = set()
+    for i, ((obj, size, zones, lights, p), rows) in enumerate(scenes):
+        rows = rows.sort_values("repeat")
+        if list(rows["repeat"]) != list(range(len(rows))):
+            raise UserError(f"{obj}_{size} {zones} lights {lights} position {p}: repeats {list(rows['repeat'])} "
+                            "are not 0..R-1")
+        ids = [int(v) for v in rows["id"]]
+        by_id = {c.id: c.histogram for c in store.iter_captures(id=ids)}
+        ordered = [by_id[k] for k in ids]
+        dtype = np.int64 if all(h.dtype == np.int64 for h in ordered) else np.float32
+        folder = root / f"{_EXPORT_NAMES.get(obj, obj)}_{inv_sizes[size]}_{zones}_{inv_lights[lights]}_NLOSdata"
+        (folder / "spad_histogram").mkdir(parents=True, exist_ok=True)
+        folders.add(folder.name)
+        if _write_npy(folder / "spad_histogram" / f"{int(p):03d}.npy", np.stack(ordered).astype(dtype), overwrite):
+            written += 1
+        else:
+            unchanged += 1
+        if progress:
+            progress(i + 1, len(scenes), folder.name)
+    first = labels.groupby("position")[["x", "y"]].first()
+    positions = {f"frame{int(p)}_tag1": [float(r.x), float(r.y)] for p, r in first.iterrows()}
+    pos_path = root / "tag1_positions.json"
+    if pos_path.exists():
+        old = {f"frame{k}_tag1": list(v) for k, v in load_positions(pos_path).items()}
+        clash = [k for k in positions if k in old and old[k] != positions[k]]
+        if clash and not overwrite:
+            raise UserError(f"{pos_path} gives other positions for {', '.join(clash[:3])}; pass --overwrite to replace")
+        positions = {**old, **positions}
+    tmp = pos_path.with_name(".tag1_positions.json.tmp")
+    tmp.write_text(json.dumps(dict(sorted(positions.items(), key=lambda kv: int(kv[0][5:].split("_")[0]))), indent=1))
+    os.replace(tmp, pos_path)
+    return {"root": str(root), "folders": len(folders), "files_written": written, "files_unchanged": unchanged,
+            "captures": int(len(labels)), "positions": len(first)}
