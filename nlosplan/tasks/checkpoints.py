@@ -1,0 +1,110 @@
+"""Checkpoints of trained models: weights and metadata only, written atomically, loaded without pickle.
+
+A checkpoint is one ``torch.save`` file holding a format tag, the model's
+``state_dict`` (tensors) and the metadata of
+:meth:`~nlosplan.tasks.training.TrainedModel.meta` as a JSON string: nothing
+that needs Python's pickle to load, so :func:`load_checkpoint` reads it with
+``torch.load(weights_only=True)`` and rebuilds the model from the recorded
+:class:`~nlosplan.tasks.models.ModelSpec`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+from pathlib import Path
+
+import torch
+
+from nlosplan.errors import UserError
+from nlosplan.tasks.models import ModelSpec, model_from_spec
+
+__all__ = ["CHECKPOINT_FORMAT", "load_checkpoint", "save_checkpoint"]
+
+CHECKPOINT_FORMAT = "nlosplan.tasks.checkpoint/1"
+
+
+def save_checkpoint(path, trained) -> Path:
+    """Write a trained model to ``path`` atomically (a temporary file, then ``os.replace``).
+
+    The file holds only tensors, strings and plain containers: the
+    ``state_dict``, a format tag and the metadata of :meth:`TrainedModel.meta`
+    as a JSON string, so that :func:`load_checkpoint` can read it with
+    ``torch.load(weights_only=True)``. A kill during the write leaves the
+    previous file (or none), never half of one.
+
+    Parameters
+    ----------
+    path : str or Path
+    trained : TrainedModel
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {"format": CHECKPOINT_FORMAT,
+               "state_dict": {k: v.detach().cpu().clone() for k, v in trained.model.state_dict().items()},
+               "meta_json": json.dumps(trained.meta())}
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            torch.save(payload, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def load_checkpoint(path):
+    """Read a checkpoint of :func:`save_checkpoint` and rebuild its model (no code is unpickled).
+
+    Returns
+    -------
+    TrainedModel
+        In eval mode on the CPU, with the recorded preprocessing, classes,
+        history and settings.
+
+    Raises
+    ------
+    UserError
+        Missing file, a file that would need pickle to load (not written by
+        nlosplan, possibly unsafe), or one of another format.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"checkpoint {path} does not exist")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:
+        raise UserError(f"{path} needs pickle to load (it holds Python objects, not only weights); refused: "
+                        "only checkpoints written by nlosplan are read") from None
+    except (RuntimeError, EOFError, OSError, ValueError) as exc:
+        raise UserError(f"{path} is not a readable checkpoint ({str(exc).splitlines()[0]})") from None
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        raise UserError(f"{path} is not an nlosplan checkpoint (expected format {CHECKPOINT_FORMAT})")
+    meta = json.loads(payload["meta_json"])
+    spec = ModelSpec.from_dict(meta["spec"])
+    net = model_from_spec(spec)
+    try:
+        net.load_state_dict(payload["state_dict"], strict=True)
+    except RuntimeError as exc:
+        raise UserError(f"{path}: weights do not fit model {spec.name} ({str(exc).splitlines()[0]})") from None
+    net.eval()
+    from nlosplan.tasks.training import Preprocessing, TrainConfig, TrainedModel
+
+    cfg = meta["config"]
+    return TrainedModel(
+        model=net, spec=spec, preprocessing=Preprocessing(**meta["preprocessing"]), config=TrainConfig(**cfg),
+        classes=None if meta["classes"] is None else tuple(meta["classes"]),
+        target_mean=None if meta["target_mean"] is None else tuple(meta["target_mean"]),
+        target_std=None if meta["target_std"] is None else tuple(meta["target_std"]),
+        history=meta["history"], best_epoch=int(meta["best_epoch"]), stopped=meta["stopped"],
+        train_seconds=float(meta["train_seconds"]), n_train=int(meta["n_train"]), n_val=int(meta["n_val"]),
+        val_rows=tuple(meta.get("val_rows", ())))
