@@ -1,0 +1,111 @@
+"""Ideal-observer classification: exact toy error rates, intervals, photons, known vs unknown position."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models import preset
+from nlosplan.tasks.ideal_observer import binomial_interval, ideal_observer, observer_accuracy
+
+SENSOR = preset("tmf8828-3x3-short")
+OBJECTS = ["A", "B", "circle", "7"]
+POSITIONS = [0, 19, 50, 99]
+FID = "draft"
+
+
+def shape(sensor=SENSOR, **kw):
+    return ideal_observer("shape", sensor, objects=OBJECTS, positions=POSITIONS, fidelity=FID, **kw)
+
+
+# ----------------------------------------------------------------------------- toy model with a known error rate
+LAM0, LAM1 = 5.0, 10.0  # one bin; decide class 1 when y log 2 > 5, i.e. y >= 8
+TRUE_ACCURACY = 1.0 - 0.5 * (stats.poisson.sf(7, LAM0) + stats.poisson.cdf(7, LAM1))
+TOY = np.array([[[LAM0]], [[LAM1]]])
+
+
+def test_toy_accuracy_matches_the_exact_rate_and_the_interval_covers_it():
+    hits, widths = 0, {}
+    for seed in range(200):
+        out = observer_accuracy(TOY, [0, 1], draws=200, seed=seed)
+        lo, hi = out["ci"]
+        hits += lo <= TRUE_ACCURACY <= hi
+    assert hits / 200 >= 0.9  # nominal 95 %
+    for draws in (100, 1600):
+        widths[draws] = np.mean([np.subtract(*observer_accuracy(TOY, [0, 1], draws=draws, seed=s)["ci"][::-1])
+                                 for s in range(20)])
+    assert widths[100] / widths[1600] == pytest.approx(4.0, rel=0.1)  # ~ 1 / sqrt(draws)
+    big = observer_accuracy(TOY, [0, 1], draws=20000, seed=1)
+    assert big["accuracy"] == pytest.approx(TRUE_ACCURACY, abs=0.01)
+    assert big["confusion"].sum() == 40000 and big["confusion"].sum(axis=1).tolist() == [20000, 20000]
+
+
+def test_toy_observer_is_deterministic_for_a_seed():
+    a = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
+    b = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
+    assert a["accuracy"] == b["accuracy"] and np.array_equal(a["decision"], b["decision"])
+
+
+def test_binomial_intervals():
+    lo, hi = binomial_interval(50, 100)
+    assert lo < 0.5 < hi and hi - lo == pytest.approx(2 * 1.96 * 0.05, rel=0.05)
+    assert binomial_interval(0, 20)[0] == 0.0 and binomial_interval(20, 20)[1] == 1.0
+    cp = binomial_interval(3, 30, method="clopper-pearson")
+    assert cp[0] <= binomial_interval(3, 30)[0] and cp[1] >= binomial_interval(3, 30)[1]  # exact is conservative
+    with pytest.raises(UserError):
+        binomial_interval(1, 2, method="bayes")
+
+
+def test_identical_classes_are_ties_broken_at_random():
+    out = observer_accuracy(np.full((3, 2, 4), 6.0), [0, 1, 2], draws=3000, seed=0)
+    assert out["accuracy"] == pytest.approx(1 / 3, abs=0.03)
+    assert np.all(out["confusion"].sum(axis=0) > 2500)  # every decision is taken, not always the first
+
+
+# ----------------------------------------------------------------------------- DENALI
+def test_noise_free_captures_are_always_right():
+    for kw in ({}, {"position_known": True}, {"rule": "max"}):
+        r = shape(draws=8, noise=False, **kw)
+        assert r.accuracy == 1.0 and np.all(np.diag(r.confusion) == 8)
+    size = ideal_observer("size", SENSOR, objects=["A", "circle"], positions=[19, 50], fidelity=FID, draws=8,
+                          noise=False)
+    assert size.classes == ("4in", "8in") and size.accuracy == 1.0
+
+
+def test_accuracy_falls_with_photons_to_chance():
+    acc = [shape(SENSOR.replace(iterations=int(SENSOR.iterations * k)), draws=200).accuracy for k in (1, 0.01, 0.001)]
+    assert acc[0] > 0.97 and acc[0] > acc[1] + 0.1 and acc[1] > acc[2] + 0.1
+    dark = shape(SENSOR.replace(photon_scale=0.0), draws=200, seed=1)
+    lo, hi = dark.ci
+    assert lo <= dark.chance <= hi and dark.chance == 0.25
+
+
+def test_known_position_is_at_least_as_accurate():
+    weak = SENSOR.replace(iterations=int(SENSOR.iterations * 0.002))
+    for seed in (0, 1):
+        unknown = shape(weak, draws=400, seed=seed)
+        known = shape(weak, draws=400, seed=seed, position_known=True)  # same captures (same seed)
+        assert known.accuracy >= unknown.accuracy
+        assert 0.3 < unknown.accuracy < 0.9
+
+
+def test_result_records_fidelity_time_and_counts():
+    r = shape(draws=10)
+    assert r.draws == 10 and r.n == 40 and r.confusion.sum() == 40 and r.per_class_accuracy.shape == (4,)
+    assert r.fidelity == "draft" and r.knobs["object_samples"] == 64
+    assert 0 < r.seconds_simulation <= r.seconds and r.seed == 0
+    assert r.classes == tuple(OBJECTS) and r.meta["positions"] == POSITIONS
+    assert "accuracy" in r.summary() and math.isclose(r.error_rate, 1 - r.accuracy)
+
+
+def test_bad_inputs_are_user_errors():
+    with pytest.raises(UserError, match="task"):
+        ideal_observer("colour", SENSOR)
+    with pytest.raises(UserError, match="rule"):
+        observer_accuracy(TOY, [0, 1], draws=5, rule="mean")
+    with pytest.raises(UserError, match="draws"):
+        observer_accuracy(TOY, [0, 1], draws=0)
+    with pytest.raises(UserError, match="at least two"):
+        ideal_observer("shape", SENSOR, objects=["A"])
