@@ -12,7 +12,7 @@ import argparse
 import sys
 
 from nlosplan import __version__
-from nlosplan.cli import bench, check, sensor, simulate
+from nlosplan.cli import bench, benchmark, check, dataset, sensor, simulate
 from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
 from nlosplan.errors import UserError
 
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
-    for room in (sensor, simulate, check, bench):
+    for room in (sensor, simulate, check, bench, dataset, benchmark):
         room.add(sub)
     return p
 

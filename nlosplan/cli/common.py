@@ -39,6 +39,24 @@ EXAMPLES = {
     "check": "nlosplan check --json",
     "bench histogram": "nlosplan bench histogram --json",
     "bench simulate": "nlosplan bench simulate --levels draft,low,default --reference-positions 0,45 --json",
+    "dataset build": (
+        "nlosplan dataset build --scene denali --sensor tmf8828-3x3-short --store out/sim3x3.sqlite",
+        "nlosplan dataset build --objects A,S,circle --sizes 8in --positions 0-9,50-59 --lights on,off "
+        "--repeats 3 --fidelity draft --seed 1 --store out/small.sqlite --json",
+    ),
+    "dataset import-denali": (
+        "nlosplan dataset import-denali denali-data/data --store out/denali.sqlite",
+        "nlosplan dataset import-denali denali-data/data --store out/denali.sqlite "
+        "--positions-json denali/assets/tag1_positions.json",
+    ),
+    "dataset export-denali": "nlosplan dataset export-denali --store out/sim3x3.sqlite --out out/sim-denali "
+                             "--zones 3x3 --lights off",
+    "dataset info": "nlosplan dataset info --store out/denali.sqlite --by-object",
+    "benchmark": (
+        "nlosplan benchmark --store out/sim3x3.sqlite --where lights=off,zones=3x3 --out out/benchmark",
+        "nlosplan benchmark --store out/denali.sqlite --where zones=3x3 --models mlp,cnn1d --tasks loc,shape "
+        "--split positions --small --json",
+    ),
 }
 
 

@@ -1,0 +1,289 @@
+"""``nlosplan dataset``: build simulated datasets, import and export the DENALI layout, describe a store."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from contextlib import contextmanager
+
+from nlosplan.cli.common import Parser, emit, note, sub_parser
+from nlosplan.errors import UserError
+
+_GROUPS = ("numbers", "letters", "shapes")
+
+
+# ----------------------------------------------------------------- option values
+def _objects(text: str) -> list[str]:
+    """``all``, or DENALI objects and class groups separated by commas (``i``, ``halfcircle`` accepted)."""
+    from nlosplan.simulators.presets.denali import CLASS_GROUPS, DENALI_OBJECTS
+    from nlosplan.tasks.denali_io import OBJECT_ALIASES
+
+    out: list[str] = []
+    for tok in (t.strip() for t in text.split(",")):
+        if tok == "all":
+            out += DENALI_OBJECTS
+        elif tok in CLASS_GROUPS:
+            out += CLASS_GROUPS[tok]
+        elif OBJECT_ALIASES.get(tok, tok) in DENALI_OBJECTS:
+            out.append(OBJECT_ALIASES.get(tok, tok))
+        else:
+            raise argparse.ArgumentTypeError(f"unknown object {tok!r}; allowed: all, {', '.join(_GROUPS)}, "
+                                             f"{', '.join(DENALI_OBJECTS)}")
+    return list(dict.fromkeys(out))
+
+
+def _positions(text: str) -> list[int]:
+    """``0-99``, ``0,5,9`` or a mix such as ``0-9,20-29`` (gantry positions 0..99)."""
+    from nlosplan.simulators.presets.denali import N_POSITIONS
+
+    out: list[int] = []
+    for tok in (t.strip() for t in text.split(",")):
+        lo, sep, hi = tok.partition("-")
+        try:
+            a, b = int(lo), int(hi if sep else lo)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{tok!r} is not a position N or a range N-M "
+                                             "(e.g. 0-99 or 0,5,9)") from None
+        if a > b:
+            raise argparse.ArgumentTypeError(f"range {tok!r} goes down; write it low-high, e.g. {b}-{a}")
+        if a < 0 or b >= N_POSITIONS:
+            raise argparse.ArgumentTypeError(f"{tok!r} is out of range; allowed: positions 0 to {N_POSITIONS - 1}")
+        out += range(a, b + 1)
+    return sorted(set(out))
+
+
+def _choices(allowed: tuple[str, ...]):
+    """An argparse type: a comma-separated list of ``allowed`` names."""
+
+    def parse(text: str) -> list[str]:
+        out = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [t for t in out if t not in allowed]
+        if bad or not out:
+            raise argparse.ArgumentTypeError(f"{', '.join(bad) or repr(text)} not allowed; "
+                                             f"allowed: {', '.join(allowed)}")
+        return list(dict.fromkeys(out))
+
+    return parse
+
+
+def _int_from(lo: int):
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if n < lo:
+            raise argparse.ArgumentTypeError(f"{n} must be >= {lo}")
+        return n
+
+    return parse
+
+
+def _fidelity(text: str) -> str:
+    from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS
+
+    if text not in FIDELITY_LEVELS:
+        raise argparse.ArgumentTypeError(f"unknown fidelity {text!r}; allowed: {', '.join(FIDELITY_LEVELS)}")
+    return text
+
+
+@contextmanager
+def _progress(args, desc: str, unit: str):
+    """A ``progress(done, total, text)`` callback drawing a tqdm bar on a terminal (None otherwise)."""
+    if args.json or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=0, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+
+    def update(done: int, total: int, text: str) -> None:
+        bar.total, bar.n = total, done
+        bar.set_postfix_str(text[:50], refresh=False)
+        bar.refresh()
+
+    try:
+        yield update
+    finally:
+        bar.close()
+
+
+def _store(args, *, create: bool, synchronous: str = "FULL"):
+    from nlosplan.tasks.store import CaptureStore
+
+    return CaptureStore(args.store, create=create, synchronous=synchronous)
+
+
+# ----------------------------------------------------------------- commands
+def _cmd_build(args) -> int:
+    from nlosplan.cli.simulate import _with_warning_lines
+    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.tasks.build import build_dataset
+
+    sensor = resolve_sensor(args.sensor)
+    with _store(args, create=True, synchronous="FULL" if args.fsync else "NORMAL") as store:
+        n = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights) * args.repeats
+        note(args, f"building up to {n} captures into {args.store} ...")
+        with _progress(args, "dataset build", "capture") as progress:
+            res, warned = _with_warning_lines(
+                build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
+                positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
+                seed=args.seed, reflectance=args.reflectance, batch=args.batch, progress=progress)
+    res["warnings"] = warned
+    text = (f"stored {res['captures_added']} new captures in {res['store']} ({res['captures_skipped']} of "
+            f"{res['captures_total']} were there already; {res['groups_skipped']} of {res['groups']} groups "
+            "were complete)\n"
+            f"{len(res['objects'])} objects x {len(res['sizes'])} sizes x {len(res['positions'])} positions x "
+            f"{len(res['lights'])} lights x {res['repeats']} repeats, {res['sensor']} ({res['zones']}), fidelity "
+            f"{args.fidelity}, seed {res['seed']}, in {res['seconds']:.1f} s ({res['captures_per_second']:.1f} "
+            f"captures/s; simulation {res['simulate_seconds']:.1f} s, store {res['store_seconds']:.1f} s)")
+    emit(args, res, text)
+    return 0
+
+
+def _skipped_lines(skipped: list[dict], limit: int = 20) -> list[str]:
+    lines = [f"  skipped {s['path']}: {s['reason']}" for s in skipped[:limit]]
+    if len(skipped) > limit:
+        lines.append(f"  ... and {len(skipped) - limit} more (see --json)")
+    return lines
+
+
+def _cmd_import(args) -> int:
+    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.tasks.denali_io import import_denali
+
+    sensors = [resolve_sensor(s) for s in args.sensor or ()]
+    with _store(args, create=True) as store, _progress(args, "import DENALI", "file") as progress:
+        res = import_denali(args.root, store, positions_json=args.positions_json, trust_pickle=args.trust_pickle,
+                            sensors=sensors, progress=progress)
+    text = "\n".join([f"imported {res['captures_added']} captures from {res['files']} files in {res['folders']} "
+                      "folders "
+                      f"of {res['root']} into {res['store']} in {res['seconds']:.1f} s "
+                      f"({res['captures_skipped']} captures, {res['files_stored_already']} files stored already)",
+                      *_skipped_lines(res["skipped"])])
+    emit(args, res, text)
+    return 0
+
+
+def _where(args) -> dict:
+    names = {"objects": "object", "sizes": "size", "lights": "lights", "zones": "zones", "positions": "position",
+             "source": "source", "sensor_hash": "sensor_hash", "seed": "seed"}
+    return {col: getattr(args, opt) for opt, col in names.items() if getattr(args, opt, None) is not None}
+
+
+def _cmd_export(args) -> int:
+    from nlosplan.tasks.denali_io import export_denali
+
+    with _store(args, create=False) as store, _progress(args, "export DENALI", "file") as progress:
+        res = export_denali(store, args.out, overwrite=args.overwrite, progress=progress, **_where(args))
+    emit(args, res, f"wrote {res['files_written']} files ({res['files_unchanged']} unchanged) in {res['folders']} "
+                    f"folders, {res['captures']} captures at {res['positions']} positions, to {res['root']}")
+    return 0
+
+
+def _cmd_info(args) -> int:
+    with _store(args, create=False) as store:
+        by = ("source", "zones", "lights", "size") + (("object",) if args.by_object else ())
+        table, sensors = store.summary(by=by), store.sensors()
+        total = store.count()
+    data = {"store": str(args.store), "captures": total, "sensors": sensors.to_dict("records"),
+            "groups": table.to_dict("records")}
+    text = "\n".join([f"{args.store}: {total} captures", "", "sensors:",
+                      sensors.to_string(index=False) if len(sensors) else "  (none)", "",
+                      "captures:", table.to_string(index=False) if len(table) else "  (none)"])
+    emit(args, data, text)
+    return 0
+
+
+# ----------------------------------------------------------------- parser
+BUILD_DESCRIPTION = """\
+Simulate DENALI captures into a capture store (SQLite): every object x size x
+position x lights scene through the fast simulator, 'repeats' Poisson captures
+each, with noise seeds derived from the seed and the scene. Captures stored
+already are skipped, so an interrupted build resumes where it stopped and
+gives the same counts as an uninterrupted one."""
+
+IMPORT_DESCRIPTION = """\
+Import the real DENALI captures: spad_histogram/NNN.npy of every
+<object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata folder, one
+capture per repeat, (x, y) of capture number NNN from tag1_positions.json.
+Unknown folders and files are listed and skipped; captures stored already are
+skipped (rerun to resume). Files that need pickle are refused unless
+--trust-pickle is given."""
+
+
+def _filters(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("filters (all given must hold)")
+    g.add_argument("--objects", type=_objects, metavar="A,S,...", help="objects, class groups or 'all'")
+    g.add_argument("--sizes", type=_choices(("4in", "8in")), metavar="4in,8in", help="object sizes")
+    g.add_argument("--lights", type=_choices(("on", "off")), metavar="on,off", help="room lights")
+    g.add_argument("--zones", type=lambda t: [z.strip() for z in t.split(",") if z.strip()], metavar="3x3,8x8",
+                   help="zone modes")
+    g.add_argument("--positions", type=_positions, metavar="0-99", help="gantry positions, e.g. 0-99 or 0,5,9")
+    g.add_argument("--source", metavar="NAME", help="capture source, e.g. real:denali or sim:fast")
+    g.add_argument("--sensor-hash", metavar="HASH", help="one stored sensor (see 'nlosplan dataset info')")
+    g.add_argument("--seed", type=int, help="build seed of simulated captures")
+
+
+def add(sub) -> None:
+    """The ``dataset`` subcommand with ``build``, ``import-denali``, ``export-denali`` and ``info``."""
+    ds = sub.add_parser("dataset", help="build, import, export and describe capture stores",
+                        description="Capture stores (SQLite): simulated DENALI datasets, the real DENALI folder "
+                                    "layout, and what a store holds.")
+    dsub = ds.add_subparsers(dest="dataset_command", metavar="SUBCOMMAND", parser_class=Parser)
+
+    b = sub_parser(dsub, "build", "dataset build",
+                   "simulate DENALI captures (Poisson counts) into a store; rerun to resume",
+                   description=BUILD_DESCRIPTION)
+    b.add_argument("--store", required=True, help="capture store file (created when missing)")
+    b.add_argument("--scene", choices=["denali"], default="denali", help="scene preset (default: denali)")
+    b.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
+    b.add_argument("--objects", type=_objects, default=_objects("all"), metavar="A,S,...",
+                   help="objects, class groups (numbers, letters, shapes) or 'all' (default: all 30)")
+    b.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
+                   help="object sizes (default: 4in,8in)")
+    b.add_argument("--positions", type=_positions, default=_positions("0-99"), metavar="0-99",
+                   help="gantry positions, e.g. 0-99, 0,5,9 or 0-9,50-59 (default: 0-99)")
+    b.add_argument("--lights", type=_choices(("on", "off")), default=["off"], metavar="on,off",
+                   help="room lights (default: off)")
+    b.add_argument("--repeats", type=_int_from(1), default=3, help="Poisson captures per scene (default: 3)")
+    b.add_argument("--fidelity", type=_fidelity, default="default",
+                   help="simulator level: draft, low, default, high, reference (default: default)")
+    b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
+                   help="object reflectance (default: retroreflective)")
+    b.add_argument("--seed", type=_int_from(0), default=0, help="build seed (default: 0)")
+    b.add_argument("--batch", type=_int_from(1), default=100, help="scenes per simulator call (default: 100)")
+    b.add_argument("--fsync", action="store_true",
+                   help="fsync every commit (survives power cuts; a build resumes identically anyway)")
+    b.add_argument("--json", action="store_true", help="machine-readable summary")
+    b.set_defaults(func=_cmd_build)
+
+    i = sub_parser(dsub, "import-denali", "dataset import-denali",
+                   "import a DENALI data folder (<obj>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata) "
+                   "into a store",
+                   description=IMPORT_DESCRIPTION)
+    i.add_argument("root", help="folder holding the *_NLOSdata folders")
+    i.add_argument("--store", required=True, help="capture store file (created when missing)")
+    i.add_argument("--positions-json", metavar="FILE", help="tag1_positions.json (default: the packaged DENALI one)")
+    i.add_argument("--sensor", action="append", metavar="SPEC",
+                   help="sensor for the folders of its zone mode (preset or file; repeatable; default: "
+                        "tmf8828-3x3-short and tmf8828-8x8-short)")
+    i.add_argument("--trust-pickle", action="store_true",
+                   help="allow capture files that need pickle (they may run code when loaded): trusted data only")
+    i.add_argument("--json", action="store_true", help="machine-readable summary")
+    i.set_defaults(func=_cmd_import)
+
+    e = sub_parser(dsub, "export-denali", "dataset export-denali",
+                   "write captures of a store in the DENALI folder layout, with tag1_positions.json")
+    e.add_argument("--store", required=True, help="capture store file")
+    e.add_argument("--out", required=True, metavar="ROOT", help="output folder (created)")
+    e.add_argument("--overwrite", action="store_true", help="replace files that hold other data")
+    e.add_argument("--json", action="store_true", help="machine-readable summary")
+    _filters(e)
+    e.set_defaults(func=_cmd_export)
+
+    n = sub_parser(dsub, "info", "dataset info", "what a capture store holds: sensors and captures by group")
+    n.add_argument("--store", required=True, help="capture store file")
+    n.add_argument("--by-object", action="store_true", help="one row per object too")
+    n.add_argument("--json", action="store_true", help="machine-readable output")
+    n.set_defaults(func=_cmd_info)
