@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from typing import Callable
 
 from nlosplan.cli.common import emit, note, sub_parser
@@ -74,9 +75,18 @@ def _load_dataset(store: str, where: dict):
 
 
 def _progress_bar(args, n_entries: int):
-    """A tqdm bar over the (model, task) entries on a terminal, else None."""
-    if args.json or not sys.stderr.isatty():
-        return None, None
+    """Progress on stderr: a tqdm bar over the (model, task) entries on a terminal, else one line per entry."""
+    if not sys.stderr.isatty():
+        def log(event: dict) -> None:  # a log file: one line per finished entry (stdout stays clean for --json)
+            if event["event"] == "start":
+                log.t0 = time.perf_counter()
+            elif event["event"] == "done":
+                took = f" in {time.perf_counter() - log.t0:.0f} s" if getattr(log, "t0", None) else " (n/a)"
+                log.t0 = None
+                print(f"benchmark: [{event['index'] + 1}/{event['total']}] {event['model']} {event['task']}{took}",
+                      file=sys.stderr, flush=True)
+
+        return None, log
     from tqdm import tqdm
 
     bar = tqdm(total=n_entries, desc="benchmark", unit="model", file=sys.stderr, leave=False)

@@ -57,6 +57,12 @@ EXAMPLES = {
         "nlosplan benchmark --store out/denali.sqlite --where zones=3x3 --models mlp,cnn1d --tasks loc,shape "
         "--split positions --small --json",
     ),
+    "study jitter": (
+        "nlosplan study jitter --store out/sim3x3.sqlite --where lights=off --out out/jitter",
+        "nlosplan study jitter --store out/sim3x3.sqlite --small --jitter-ps 0,100,300,600 --models mlp,cnn1d,cnn3d "
+        "--threads 2 --json",
+        "nlosplan study jitter --denali denali-data/data --where lights=off --out out/jitter-real",
+    ),
 }
 
 
