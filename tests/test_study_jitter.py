@@ -22,12 +22,7 @@ from nlosplan.tasks.store import CaptureStore
 STUDY = JitterStudy(jitter_ps=(600, 0), models=("mlp", "cnn1d"), epochs=3, width=0.125)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -14,12 +14,7 @@ from nlosplan.reports.benchmark_table import benchmark_markdown, benchmark_table
 from nlosplan.tasks.benchmark import run_benchmark
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -16,13 +16,7 @@ from nlosplan.tasks.training import (Preprocessing, TrainConfig, apply_histogram
                                      load_checkpoint, save_checkpoint, train_model)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread: faster than two on a shared 2-core runner, and the same results every run."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -154,6 +154,23 @@ Writes benchmark.csv (models as rows, task/metric/group columns), benchmark.md
 and benchmark.json (everything, with the settings and timings) into --out."""
 
 
+def add_training_options(group) -> None:
+    """Training options shared by ``nlosplan benchmark`` and the studies built on it."""
+    group.add_argument("--small", action="store_true",
+                       help=f"quick run: --epochs {SMALL['epochs']} --width {SMALL['width']} unless given")
+    group.add_argument("--epochs", type=_number(int), metavar="N",
+                       help=f"epoch cap per model (default: {DEFAULT_EPOCHS}; with --profile denali, DENALI's)")
+    group.add_argument("--width", type=_number(float), metavar="F",
+                       help=f"model size factor, 1 = the paper's (default: {DEFAULT_WIDTH})")
+    group.add_argument("--patience", type=_number(int, zero_ok=True), default=DEFAULT_PATIENCE, metavar="N",
+                       help="early-stopping patience in epochs, 0 for none (default: %(default)s)")
+    group.add_argument("--max-seconds", type=_number(float), metavar="S", help="wall-clock budget per model")
+    group.add_argument("--profile", choices=PROFILES, default="cpu",
+                       help="training settings: cpu (lr 1e-3, batch 64, log1p + z-score) or denali "
+                            "(its per-model lr, batch, epochs, preprocessing) (default: cpu)")
+    group.add_argument("--keep-repeats", action="store_true", help="train on every repeat instead of their mean")
+
+
 def add(sub) -> None:
     """The ``benchmark`` subcommand."""
     p = sub_parser(sub, "benchmark", "benchmark", "train and test the four DENALI models on the three tasks; "
@@ -166,20 +183,8 @@ def add(sub) -> None:
     p.add_argument("--tasks", type=_names("task(s)", TASKS), default=list(TASKS), metavar="T,T",
                    help=f"tasks (default: {','.join(TASKS)})")
     p.add_argument("--split", choices=SPLITS, default="random", help="train/test split (default: random)")
-    p.add_argument("--epochs", type=_number(int), metavar="N",
-                   help=f"epoch cap per model (default: {DEFAULT_EPOCHS}; with --profile denali, DENALI's)")
-    p.add_argument("--width", type=_number(float), metavar="F",
-                   help=f"model size factor, 1 = the paper's (default: {DEFAULT_WIDTH})")
-    p.add_argument("--patience", type=_number(int, zero_ok=True), default=DEFAULT_PATIENCE, metavar="N",
-                   help="early-stopping patience in epochs, 0 for none (default: %(default)s)")
-    p.add_argument("--max-seconds", type=_number(float), metavar="S", help="wall-clock budget per model")
-    p.add_argument("--small", action="store_true",
-                   help=f"quick run: --epochs {SMALL['epochs']} --width {SMALL['width']} unless given")
-    p.add_argument("--profile", choices=PROFILES, default="cpu",
-                   help="training settings: cpu (lr 1e-3, batch 64, log1p + z-score) or denali "
-                        "(its per-model lr, batch, epochs, preprocessing) (default: cpu)")
+    add_training_options(p)
     p.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
-    p.add_argument("--keep-repeats", action="store_true", help="train on every repeat instead of their mean")
     p.add_argument("--threads", type=_number(int), metavar="N", help="torch CPU threads (default: torch's)")
     p.add_argument("--save-models", action="store_true", help="also write each model's checkpoint to OUT/models")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from nlosplan.cli.benchmark import _names, _number, parse_where
+from nlosplan.cli.benchmark import _names, _number, add_training_options, parse_where
 from nlosplan.cli.common import Parser, emit, note, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
@@ -184,18 +184,7 @@ def add(sub) -> None:
     design.add_argument("--split", choices=SPLITS, default="random", help="train/test split (default: random)")
     design.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
     train = p.add_argument_group("training (as 'nlosplan benchmark')")
-    train.add_argument("--small", action="store_true",
-                       help=f"quick run: --epochs {SMALL['epochs']} --width {SMALL['width']} unless given")
-    train.add_argument("--epochs", type=_number(int), metavar="N",
-                       help=f"epoch cap per model (default: {DEFAULT_EPOCHS}; with --profile denali, DENALI's)")
-    train.add_argument("--width", type=_number(float), metavar="F",
-                       help=f"model size factor, 1 = the paper's (default: {DEFAULT_WIDTH})")
-    train.add_argument("--patience", type=_number(int, zero_ok=True), default=DEFAULT_PATIENCE, metavar="N",
-                       help="early-stopping patience in epochs, 0 for none (default: %(default)s)")
-    train.add_argument("--max-seconds", type=_number(float), metavar="S", help="wall-clock budget per model")
-    train.add_argument("--profile", choices=PROFILES, default="cpu",
-                       help="training settings: cpu or denali (its per-model settings) (default: cpu)")
-    train.add_argument("--keep-repeats", action="store_true", help="train on every repeat instead of their mean")
+    add_training_options(train)
     train.add_argument("--threads", type=_number(int), default=DEFAULT_THREADS, metavar="N",
                        help="torch CPU threads (default: %(default)s: one-zone models are too small to gain from "
                             "more, and extra threads stall on a busy machine)")
