@@ -1,7 +1,7 @@
 """The ``nlosplan`` command: argument parsing and calls into the rooms.
 
 One module per subcommand (``sensor``, ``simulate``, ``check``, ``bench``,
-``dataset``, ``benchmark``, ``study``);
+``dataset``, ``benchmark``, ``study``, ``evaluate``);
 each adds its parser and holds no logic beyond parsing and calling the rooms.
 User errors (:class:`nlosplan.errors.UserError`, bad arguments) print one
 line on stderr and exit with code 2; no traceback.
@@ -13,7 +13,7 @@ import argparse
 import sys
 
 from nlosplan import __version__
-from nlosplan.cli import bench, benchmark, check, dataset, sensor, simulate, study
+from nlosplan.cli import bench, benchmark, check, dataset, evaluate, sensor, simulate, study
 from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
 from nlosplan.errors import UserError
 
@@ -29,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
-    for room in (sensor, simulate, check, bench, dataset, benchmark, study):
+    for room in (sensor, simulate, check, bench, dataset, benchmark, study, evaluate):
         room.add(sub)
     return p
 

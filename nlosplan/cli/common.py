@@ -63,6 +63,17 @@ EXAMPLES = {
         "--threads 2 --json",
         "nlosplan study jitter --denali denali-data/data --where lights=off --out out/jitter-real",
     ),
+    "evaluate crlb": (
+        "nlosplan evaluate crlb --objects A,S --sizes 4in,8in --positions 0-99 --repeats 3",
+        "nlosplan evaluate crlb --objects A --positions 0-9 --nuisance photon_scale,ambient --lights on "
+        "--fidelity draft --json",
+        "nlosplan evaluate crlb --sensor tmf8828-8x8-short --objects shapes --positions 0,45,99 --jitter-ps 300",
+    ),
+    "evaluate observer": (
+        "nlosplan evaluate observer shape --objects all --size 8in --draws 100",
+        "nlosplan evaluate observer size --objects letters --positions 0-9 --photon-scale 0.1 --fidelity draft --json",
+        "nlosplan evaluate observer shape --objects A,S,circle --position-known --rule max --seed 1",
+    ),
 }
 
 
