@@ -147,7 +147,9 @@ seed 42), or held-out positions, object classes or sizes ('sizes' trains on
 4 in, 'sizes:8in' on 8 in). Training: Adam, early stopping on a validation
 part of the training set, the best epoch kept.
 
-Cost (2 CPU cores, 6,000 scenes): see README "Benchmark"; --small
+Cost (2 CPU cores, 6,000 scenes, --threads 1): MLP and 1D CNN seconds to
+a minute per task, the deep 3D CNN 35-45 s and the Transformer 60 s per epoch (see
+README "NLOS tasks"; --max-seconds caps each). --small
 (= --epochs {SMALL['epochs']} --width {SMALL['width']}) is the quick run for CI.
 
 Writes benchmark.csv (models as rows, task/metric/group columns), benchmark.md
