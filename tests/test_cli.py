@@ -95,3 +95,12 @@ def test_check_json_passes_at_least_20_cases(capsys):
     assert not failed, failed
     assert code == 0
     assert all(set(c) >= {"name", "passed", "detail"} for c in data["cases"])
+
+
+@pytest.mark.parametrize("group, sub", [("sensor", "list"), ("bench", "histogram"), ("dataset", "build"),
+                                        ("study", "jitter"), ("evaluate", "crlb")])
+def test_a_command_group_alone_prints_its_own_help_and_exits_2(capsys, group, sub):
+    assert main([group]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usage: nlosplan {group} ") and sub in err
+    assert "nlosplan simulate" not in err  # not the whole command's help

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Sequence
 
-from nlosplan.cli.common import Parser, emit, sub_parser
+from nlosplan.cli.common import command_group, emit, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.simulators.fast.bench import (
     DEFAULT_LEVELS,
@@ -172,8 +172,9 @@ def _cmd_bench_simulate(args) -> int:
 
 def add(sub) -> None:
     """The ``bench`` subcommand with ``histogram`` and ``simulate``."""
-    bench = sub.add_parser("bench", help="benchmarks that print figures", description="Benchmarks that print figures.")
-    bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=Parser)
+    bsub = command_group(sub, "bench", "benchmarks that print figures",
+                         "Benchmarks that print figures.",
+                         metavar="BENCHMARK")
     bh = sub_parser(bsub, "histogram", "bench histogram",
                     "histograms per second: 3x3x128 and 8x8x128, jitter + ambient + Poisson, single and vmap-batched")
     bh.add_argument("--batch", type=int, default=256, help="frames per batched call (default: %(default)s)")

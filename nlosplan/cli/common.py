@@ -91,6 +91,18 @@ def sub_parser(subparsers, name: str, key: str, help_text: str, description: str
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
+def command_group(sub, name: str, help_text: str, description: str, metavar: str = "SUBCOMMAND"):
+    """A subcommand that holds subcommands (``nlosplan NAME SUB ...``); returns the holder for :func:`sub_parser`."""
+    group = sub.add_parser(name, help=help_text, description=description)
+
+    def usage(args) -> int:  # `nlosplan NAME` alone: this group's help, not the whole command's
+        group.print_help(sys.stderr)
+        return EXIT_USAGE
+
+    group.set_defaults(func=usage)
+    return group.add_subparsers(dest=f"{name}_command", metavar=metavar, parser_class=Parser)
+
+
 def note(args, message: str) -> None:
     """One line on stderr before long work, only for a person watching a terminal (not with --json)."""
     if not args.json and sys.stderr.isatty():

@@ -6,7 +6,7 @@ import argparse
 import sys
 from contextlib import contextmanager
 
-from nlosplan.cli.common import Parser, emit, note, sub_parser
+from nlosplan.cli.common import command_group, emit, note, sub_parser
 from nlosplan.errors import UserError
 
 _GROUPS = ("numbers", "letters", "shapes")
@@ -227,10 +227,10 @@ def _filters(p: argparse.ArgumentParser) -> None:
 
 def add(sub) -> None:
     """The ``dataset`` subcommand with ``build``, ``import-denali``, ``export-denali`` and ``info``."""
-    ds = sub.add_parser("dataset", help="build, import, export and describe capture stores",
-                        description="Capture stores (SQLite): simulated DENALI datasets, the real DENALI folder "
-                                    "layout, and what a store holds.")
-    dsub = ds.add_subparsers(dest="dataset_command", metavar="SUBCOMMAND", parser_class=Parser)
+    dsub = command_group(sub, "dataset", "build, import, export and describe capture stores",
+                         "Capture stores (SQLite): simulated DENALI datasets, the real DENALI folder layout, and what a "
+                         "store holds.",
+                         metavar="SUBCOMMAND")
 
     b = sub_parser(dsub, "build", "dataset build",
                    "simulate DENALI captures (Poisson counts) into a store; rerun to resume",

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from nlosplan.cli.benchmark import _number
-from nlosplan.cli.common import Parser, emit, note, sub_parser
+from nlosplan.cli.common import command_group, emit, note, sub_parser
 from nlosplan.cli.dataset import _choices, _fidelity, _int_from, _objects, _positions
 from nlosplan.errors import UserError
 
@@ -210,11 +210,11 @@ def _common(p, *, jitter: bool) -> None:
 
 def add(sub) -> None:
     """The ``evaluate`` subcommand with ``crlb`` and ``observer``."""
-    ev = sub.add_parser("evaluate", help="fast model-based evaluators of a sensor design (crlb, observer)",
-                        description="Fast model-based evaluators of a sensor design on DENALI scenes: the "
-                                    "Cramer-Rao bound on localization and the ideal observer's classification "
-                                    "accuracy. Both assume the simulator is the truth.")
-    esub = ev.add_subparsers(dest="evaluate_command", metavar="EVALUATOR", parser_class=Parser)
+    esub = command_group(sub, "evaluate", "fast model-based evaluators of a sensor design (crlb, observer)",
+                         "Fast model-based evaluators of a sensor design on DENALI scenes: the Cramer-Rao bound on "
+                         "localization and the ideal observer's classification accuracy. Both assume the simulator is the "
+                         "truth.",
+                         metavar="EVALUATOR")
 
     c = sub_parser(esub, "crlb", "evaluate crlb",
                    "Cramer-Rao lower bound on localization RMSE (unbiased estimators), per object and size",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from nlosplan.cli.common import Parser, emit, sub_parser
+from nlosplan.cli.common import command_group, emit, sub_parser
 
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
@@ -45,9 +45,9 @@ def _cmd_sensor_fit(args) -> int:
 
 def add(sub) -> None:
     """The ``sensor`` subcommand and its subcommands."""
-    sensor = sub.add_parser("sensor", help="list, show and measure sensor presets",
-                            description="Sensor presets: list them, show one, measure the time base from data.")
-    ssub = sensor.add_subparsers(dest="sensor_command", metavar="SUBCOMMAND", parser_class=Parser)
+    ssub = command_group(sub, "sensor", "list, show and measure sensor presets",
+                         "Sensor presets: list them, show one, measure the time base from data.",
+                         metavar="SUBCOMMAND")
     s_list = sub_parser(ssub, "list", "sensor list", "list the sensor presets")
     s_list.add_argument("--json", action="store_true", help="machine-readable output")
     s_list.set_defaults(func=_cmd_sensor_list)

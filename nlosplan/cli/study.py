@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from nlosplan.cli.benchmark import _names, _number, add_training_options, parse_where
-from nlosplan.cli.common import Parser, emit, note, sub_parser
+from nlosplan.cli.common import command_group, emit, note, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
 from nlosplan.tasks.benchmark import DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL
@@ -156,10 +156,10 @@ do not help these small models and can be far slower on a busy machine
 
 def add(sub) -> None:
     """The ``study`` subcommand with ``jitter``."""
-    st = sub.add_parser("study", help="declarative studies over the benchmark (jitter)",
-                        description="Declarative studies: a small configuration of what to vary, run through the "
-                                    "benchmark models, written as tables, JSON and a figure.")
-    ssub = st.add_subparsers(dest="study_command", metavar="STUDY", parser_class=Parser)
+    ssub = command_group(sub, "study", "declarative studies over the benchmark (jitter)",
+                         "Declarative studies: a small configuration of what to vary, run through the benchmark models, "
+                         "written as tables, JSON and a figure.",
+                         metavar="STUDY")
     p = sub_parser(ssub, "jitter", "study jitter",
                    "DENALI's timing-jitter study: centre zone, Gaussian jitter at training and test, three tasks",
                    description=JITTER_DESCRIPTION)
