@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Sequence
 
-from nlosplan.cli.common import command_group, emit, sub_parser
+from nlosplan.cli.common import command_group, emit, progress_bar, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.simulators.fast.bench import (
     DEFAULT_LEVELS,
@@ -149,23 +148,13 @@ def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **
 
 
 def _cmd_bench_simulate(args) -> int:
-    progress = None
-    bar = None
-    if not args.json and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions)),
-                   desc="bench simulate", unit="step", file=sys.stderr, leave=False)
-
+    steps = bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions))
+    with progress_bar(args, steps, "bench simulate", "step") as bar:
         def progress(text: str) -> None:
             bar.set_postfix_str(text[:60])
             bar.update(1)
 
-    try:
-        result, text = run_from_args(args, progress)
-    finally:
-        if bar is not None:
-            bar.close()
+        result, text = run_from_args(args, None if bar is None else progress)
     emit(args, result, text)
     return 0
 

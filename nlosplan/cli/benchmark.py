@@ -2,69 +2,16 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
-from typing import Callable
+from contextlib import contextmanager
 
-from nlosplan.cli.common import emit, note, sub_parser
-from nlosplan.errors import UserError
+from nlosplan.cli.common import emit, names_type, note, number_type, parse_where, progress_bar, sub_parser
 from nlosplan.tasks.benchmark import DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL
 from nlosplan.tasks.models import MODEL_NAMES, TASKS
 from nlosplan.tasks.splits import SPLITS
 
 DEFAULT_OUT = "nlosplan-out/benchmark"
-_INT_COLUMNS = ("position", "repeat")
-
-
-def _names(kind: str, allowed) -> Callable[[str], list[str]]:
-    """An argparse type: a comma-separated list of names from ``allowed``."""
-
-    def parse(text: str) -> list[str]:
-        names = [v.strip() for v in text.split(",") if v.strip()]
-        bad = [n for n in names if n not in allowed]
-        if bad or not names:
-            raise argparse.ArgumentTypeError(f"unknown {kind} {', '.join(bad) or '(none)'}; allowed: {', '.join(allowed)}")
-        return list(dict.fromkeys(names))
-
-    return parse
-
-
-def _number(cast, *, zero_ok: bool = False) -> Callable[[str], float]:
-    """An argparse type: a number > 0 (>= 0 with ``zero_ok``)."""
-
-    def parse(text: str):
-        try:
-            value = cast(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if cast is int else 'a number'}") from None
-        if not (value >= 0 if zero_ok else value > 0) or value != value:
-            raise argparse.ArgumentTypeError(f"{text} must be {'>= 0' if zero_ok else '> 0'}")
-        return value
-
-    return parse
-
-
-def parse_where(text: str | None) -> dict:
-    """``lights=off,zones=3x3,object=A|S`` as ``{"lights": "off", "zones": "3x3", "object": ["A", "S"]}``."""
-    where: dict = {}
-    for item in (text or "").split(","):
-        if not item.strip():
-            continue
-        key, sep, value = item.partition("=")
-        key, value = key.strip(), value.strip()
-        if not sep or not key or not value:
-            raise UserError(f"--where {text!r}: each filter must look like column=value (alternatives a|b), "
-                            "e.g. lights=off,zones=3x3")
-        values = [v.strip() for v in value.split("|") if v.strip()]
-        if key in _INT_COLUMNS:
-            try:
-                values = [int(v) for v in values]
-            except ValueError:
-                raise UserError(f"--where {key}={value}: {key} takes integers") from None
-        where[key] = values[0] if len(values) == 1 else values
-    return where
-
 
 def _load_dataset(store: str, where: dict):
     """The captures of ``store`` that match ``where`` (a :class:`~nlosplan.tasks.dataset.Dataset`)."""
@@ -74,32 +21,33 @@ def _load_dataset(store: str, where: dict):
         return st.load(**where)
 
 
-def _progress_bar(args, n_entries: int):
+def _log_line(event: dict) -> None:
+    """Progress for a log file: one stderr line per finished entry (stdout stays clean for --json)."""
+    if event["event"] == "start":
+        _log_line.t0 = time.perf_counter()
+    elif event["event"] == "done":
+        t0, _log_line.t0 = getattr(_log_line, "t0", None), None
+        took = " (n/a)" if t0 is None else f" in {time.perf_counter() - t0:.0f} s"
+        print(f"benchmark: [{event['index'] + 1}/{event['total']}] {event['model']} {event['task']}{took}",
+              file=sys.stderr, flush=True)
+
+
+@contextmanager
+def _progress(args, n_entries: int):
     """Progress on stderr: a tqdm bar over the (model, task) entries on a terminal, else one line per entry."""
     if not sys.stderr.isatty():
-        def log(event: dict) -> None:  # a log file: one line per finished entry (stdout stays clean for --json)
-            if event["event"] == "start":
-                log.t0 = time.perf_counter()
+        yield _log_line
+        return
+    with progress_bar(args, n_entries, "benchmark", "model") as bar:
+        def update(event: dict) -> None:
+            if event["event"] == "epoch":
+                rec = event["record"]
+                val = "" if rec["val_loss"] is None else f" val {rec['val_loss']:.3g}"
+                bar.set_postfix_str(f"{event['model']} {event['task']} epoch {rec['epoch']}{val}")
             elif event["event"] == "done":
-                took = f" in {time.perf_counter() - log.t0:.0f} s" if getattr(log, "t0", None) else " (n/a)"
-                log.t0 = None
-                print(f"benchmark: [{event['index'] + 1}/{event['total']}] {event['model']} {event['task']}{took}",
-                      file=sys.stderr, flush=True)
+                bar.update(1)
 
-        return None, log
-    from tqdm import tqdm
-
-    bar = tqdm(total=n_entries, desc="benchmark", unit="model", file=sys.stderr, leave=False)
-
-    def progress(event: dict) -> None:
-        if event["event"] == "epoch":
-            rec = event["record"]
-            val = "" if rec["val_loss"] is None else f" val {rec['val_loss']:.3g}"
-            bar.set_postfix_str(f"{event['model']} {event['task']} epoch {rec['epoch']}{val}")
-        elif event["event"] == "done":
-            bar.update(1)
-
-    return bar, progress
+        yield None if bar is None else update
 
 
 def _cmd_benchmark(args) -> int:
@@ -110,23 +58,13 @@ def _cmd_benchmark(args) -> int:
 
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    epochs, width = args.epochs, args.width
-    if args.small:
-        epochs = SMALL["epochs"] if epochs is None else epochs
-        width = SMALL["width"] if width is None else width
     where = parse_where(args.where)
     note(args, f"loading {args.store} ({', '.join(f'{k}={v}' for k, v in where.items()) or 'all captures'}) ...")
     dataset = _load_dataset(args.store, where)
-    bar, progress = _progress_bar(args, len(args.models) * len(args.tasks))
-    try:
+    with _progress(args, len(args.models) * len(args.tasks)) as progress:
         result = run_benchmark(dataset, models=args.models, tasks=args.tasks, split=args.split, seed=args.seed,
-                               epochs=epochs, width=DEFAULT_WIDTH if width is None else width,
-                               average_repeats=not args.keep_repeats, profile=args.profile,
-                               patience=None if args.patience == 0 else args.patience, max_seconds=args.max_seconds,
-                               checkpoint_dir=f"{args.out}/models" if args.save_models else None, progress=progress)
-    finally:
-        if bar is not None:
-            bar.close()
+                               checkpoint_dir=f"{args.out}/models" if args.save_models else None, progress=progress,
+                               **training_options(args))
     result["config"]["store"] = str(args.store)
     result["config"]["where"] = where
     files = write_benchmark(result, args.out)
@@ -160,17 +98,28 @@ def add_training_options(group) -> None:
     """Training options shared by ``nlosplan benchmark`` and the studies built on it."""
     group.add_argument("--small", action="store_true",
                        help=f"quick run: --epochs {SMALL['epochs']} --width {SMALL['width']} unless given")
-    group.add_argument("--epochs", type=_number(int), metavar="N",
+    group.add_argument("--epochs", type=number_type(int), metavar="N",
                        help=f"epoch cap per model (default: {DEFAULT_EPOCHS}; with --profile denali, DENALI's)")
-    group.add_argument("--width", type=_number(float), metavar="F",
+    group.add_argument("--width", type=number_type(float), metavar="F",
                        help=f"model size factor, 1 = the paper's (default: {DEFAULT_WIDTH})")
-    group.add_argument("--patience", type=_number(int, zero_ok=True), default=DEFAULT_PATIENCE, metavar="N",
+    group.add_argument("--patience", type=number_type(int, zero_ok=True), default=DEFAULT_PATIENCE, metavar="N",
                        help="early-stopping patience in epochs, 0 for none (default: %(default)s)")
-    group.add_argument("--max-seconds", type=_number(float), metavar="S", help="wall-clock budget per model")
+    group.add_argument("--max-seconds", type=number_type(float), metavar="S", help="wall-clock budget per model")
     group.add_argument("--profile", choices=PROFILES, default="cpu",
                        help="training settings: cpu (lr 1e-3, batch 64, log1p + z-score) or denali "
                             "(its per-model lr, batch, epochs, preprocessing) (default: cpu)")
     group.add_argument("--keep-repeats", action="store_true", help="train on every repeat instead of their mean")
+
+
+def training_options(args) -> dict:
+    """The parsed :func:`add_training_options`, with --small's defaults: keywords of ``run_benchmark``."""
+    epochs, width = args.epochs, args.width
+    if args.small:
+        epochs = SMALL["epochs"] if epochs is None else epochs
+        width = SMALL["width"] if width is None else width
+    return {"epochs": epochs, "width": DEFAULT_WIDTH if width is None else width,
+            "patience": None if args.patience == 0 else args.patience, "average_repeats": not args.keep_repeats,
+            "profile": args.profile, "max_seconds": args.max_seconds}
 
 
 def add(sub) -> None:
@@ -180,14 +129,14 @@ def add(sub) -> None:
     p.add_argument("--store", required=True, metavar="PATH", help="capture store (SQLite file)")
     p.add_argument("--where", metavar="COL=V,...", help="filter captures, e.g. lights=off,zones=3x3 "
                                                          "(alternatives with |, quoted: 'object=A|S')")
-    p.add_argument("--models", type=_names("model(s)", MODEL_NAMES), default=list(MODEL_NAMES), metavar="M,M",
+    p.add_argument("--models", type=names_type("model(s)", MODEL_NAMES), default=list(MODEL_NAMES), metavar="M,M",
                    help=f"models (default: {','.join(MODEL_NAMES)})")
-    p.add_argument("--tasks", type=_names("task(s)", TASKS), default=list(TASKS), metavar="T,T",
+    p.add_argument("--tasks", type=names_type("task(s)", TASKS), default=list(TASKS), metavar="T,T",
                    help=f"tasks (default: {','.join(TASKS)})")
     p.add_argument("--split", choices=SPLITS, default="random", help="train/test split (default: random)")
     add_training_options(p)
     p.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
-    p.add_argument("--threads", type=_number(int), metavar="N", help="torch CPU threads (default: torch's)")
+    p.add_argument("--threads", type=number_type(int), metavar="N", help="torch CPU threads (default: torch's)")
     p.add_argument("--save-models", action="store_true", help="also write each model's checkpoint to OUT/models")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print the whole result as JSON")

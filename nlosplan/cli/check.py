@@ -2,22 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 
-from nlosplan.cli.common import emit, sub_parser
+from nlosplan.cli.common import emit, progress_bar, sub_parser
 
 def _cmd_check(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.stability import all_cases, run_cases
 
     cases = all_cases()
-    progress = None
-    if not args.json and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(cases), desc="stability cases", unit="case", file=sys.stderr, leave=False)
-        progress = lambda _r: bar.update(1)  # noqa: E731
-    results = run_cases(cases, progress)
+    with progress_bar(args, len(cases), "stability cases", "case") as bar:
+        results = run_cases(cases, None if bar is None else lambda _r: bar.update(1))
     ok = all(r.passed for r in results)
     data = {"passed": ok, "cases": [{"name": r.name, "passed": r.passed, "requirement": r.requirement,
                                      "detail": r.detail, "seconds": round(r.seconds, 3)} for r in results]}

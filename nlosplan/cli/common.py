@@ -5,10 +5,63 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from contextlib import contextmanager
+from typing import Callable
 
 from nlosplan.errors import UserError
 
 EXIT_USAGE = 2
+_INT_COLUMNS = ("position", "repeat")  # --where columns that take integers
+
+
+def names_type(kind: str, allowed) -> Callable[[str], list[str]]:
+    """An argparse type: a comma-separated list of names from ``allowed``."""
+
+    def parse(text: str) -> list[str]:
+        names = [v.strip() for v in text.split(",") if v.strip()]
+        bad = [n for n in names if n not in allowed]
+        if bad or not names:
+            raise argparse.ArgumentTypeError(f"unknown {kind} {', '.join(bad) or '(none)'}; allowed: {', '.join(allowed)}")
+        return list(dict.fromkeys(names))
+
+    return parse
+
+
+def number_type(cast, *, zero_ok: bool = False) -> Callable[[str], float]:
+    """An argparse type: a number > 0 (>= 0 with ``zero_ok``)."""
+
+    def parse(text: str):
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if cast is int else 'a number'}") from None
+        if not (value >= 0 if zero_ok else value > 0) or value != value:
+            raise argparse.ArgumentTypeError(f"{text} must be {'>= 0' if zero_ok else '> 0'}")
+        return value
+
+    return parse
+
+
+def parse_where(text: str | None) -> dict:
+    """``lights=off,zones=3x3,object=A|S`` as ``{"lights": "off", "zones": "3x3", "object": ["A", "S"]}``."""
+    where: dict = {}
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise UserError(f"--where {text!r}: each filter must look like column=value (alternatives a|b), "
+                            "e.g. lights=off,zones=3x3")
+        values = [v.strip() for v in value.split("|") if v.strip()]
+        if key in _INT_COLUMNS:
+            try:
+                values = [int(v) for v in values]
+            except ValueError:
+                raise UserError(f"--where {key}={value}: {key} takes integers") from None
+        where[key] = values[0] if len(values) == 1 else values
+    return where
+
 
 
 class Parser(argparse.ArgumentParser):
@@ -101,6 +154,21 @@ def command_group(sub, name: str, help_text: str, description: str, metavar: str
 
     group.set_defaults(func=usage)
     return group.add_subparsers(dest=f"{name}_command", metavar=metavar, parser_class=Parser)
+
+
+@contextmanager
+def progress_bar(args, total: int, desc: str, unit: str):
+    """A tqdm bar on stderr for a person at a terminal (not with --json), closed on exit; None otherwise."""
+    if getattr(args, "json", False) or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
+    try:
+        yield bar
+    finally:
+        bar.close()
 
 
 def note(args, message: str) -> None:

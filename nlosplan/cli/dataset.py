@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from contextlib import contextmanager
 
-from nlosplan.cli.common import command_group, emit, note, sub_parser
-from nlosplan.errors import UserError
+from nlosplan.cli.common import command_group, emit, note, progress_bar, sub_parser
 
 _GROUPS = ("numbers", "letters", "shapes")
 
@@ -90,22 +88,13 @@ def _fidelity(text: str) -> str:
 @contextmanager
 def _progress(args, desc: str, unit: str):
     """A ``progress(done, total, text)`` callback drawing a tqdm bar on a terminal (None otherwise)."""
-    if args.json or not sys.stderr.isatty():
-        yield None
-        return
-    from tqdm import tqdm
+    with progress_bar(args, 0, desc, unit) as bar:
+        def update(done: int, total: int, text: str) -> None:
+            bar.total, bar.n = total, done
+            bar.set_postfix_str(text[:50], refresh=False)
+            bar.refresh()
 
-    bar = tqdm(total=0, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
-
-    def update(done: int, total: int, text: str) -> None:
-        bar.total, bar.n = total, done
-        bar.set_postfix_str(text[:50], refresh=False)
-        bar.refresh()
-
-    try:
-        yield update
-    finally:
-        bar.close()
+        yield None if bar is None else update
 
 
 def _store(args, *, create: bool, synchronous: str = "FULL"):

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import math
 
-from nlosplan.cli.benchmark import _number
-from nlosplan.cli.common import command_group, emit, note, sub_parser
+from nlosplan.cli.common import command_group, emit, note, number_type, sub_parser
 from nlosplan.cli.dataset import _choices, _fidelity, _int_from, _objects, _positions
 from nlosplan.errors import UserError
 
@@ -200,10 +199,10 @@ def _common(p, *, jitter: bool) -> None:
     p.add_argument("--lights", choices=("on", "off"), default="off", help="room lights (default: off)")
     p.add_argument("--fidelity", type=_fidelity, default="default",
                    help="simulator level: draft, low, default, high, reference (default: default)")
-    p.add_argument("--photon-scale", type=_number(float, zero_ok=True), metavar="F",
+    p.add_argument("--photon-scale", type=number_type(float, zero_ok=True), metavar="F",
                    help="replace the sensor's photon scale (detected photons per unit response; >= 0)")
     if jitter:
-        p.add_argument("--jitter-ps", type=_number(float, zero_ok=True), metavar="J",
+        p.add_argument("--jitter-ps", type=number_type(float, zero_ok=True), metavar="J",
                        help="replace the sensor's timing-jitter FWHM, ps (>= 0)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
 

@@ -8,11 +8,11 @@ import sys
 import time
 from pathlib import Path
 
-from nlosplan.cli.benchmark import _names, _number, add_training_options, parse_where
-from nlosplan.cli.common import command_group, emit, note, sub_parser
+from nlosplan.cli.benchmark import add_training_options, training_options
+from nlosplan.cli.common import command_group, emit, names_type, note, number_type, parse_where, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
-from nlosplan.tasks.benchmark import DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL
+from nlosplan.tasks.benchmark import DEFAULT_EPOCHS
 from nlosplan.tasks.models import MODEL_NAMES, TASKS
 from nlosplan.tasks.splits import SPLITS
 
@@ -93,15 +93,8 @@ def _cmd_jitter(args) -> int:
                         "(a real DENALI data folder to import)")
     if args.trust_pickle and args.denali is None:
         raise UserError("--trust-pickle only applies with --denali DIR")
-    epochs, width = args.epochs, args.width
-    if args.small:
-        epochs = SMALL["epochs"] if epochs is None else epochs
-        width = SMALL["width"] if width is None else width
     study = JitterStudy(jitter_ps=tuple(args.jitter_ps), models=tuple(args.models), tasks=tuple(args.tasks),
-                        zone=args.zone, split=args.split, seed=args.seed, epochs=epochs,
-                        width=DEFAULT_WIDTH if width is None else width,
-                        patience=None if args.patience == 0 else args.patience,
-                        average_repeats=not args.keep_repeats, profile=args.profile, max_seconds=args.max_seconds)
+                        zone=args.zone, split=args.split, seed=args.seed, **training_options(args))
     where = parse_where(args.where)
     torch.set_num_threads(args.threads)
     store = Path(args.store) if args.store is not None else Path(args.out) / "denali.sqlite"
@@ -174,10 +167,10 @@ def add(sub) -> None:
     design = p.add_argument_group("study")
     design.add_argument("--jitter-ps", type=_jitter_levels, default=list(DEFAULT_JITTER_PS), metavar="J,J",
                         help=f"jitter FWHMs in ps (default: {','.join(f'{v:g}' for v in DEFAULT_JITTER_PS)})")
-    design.add_argument("--models", type=_names("model(s)", MODEL_NAMES), default=list(DEFAULT_MODELS), metavar="M,M",
+    design.add_argument("--models", type=names_type("model(s)", MODEL_NAMES), default=list(DEFAULT_MODELS), metavar="M,M",
                         help=f"models among {','.join(MODEL_NAMES)} (default: {','.join(DEFAULT_MODELS)}; one zone "
                              "leaves the 3D CNN nothing spatial, the Transformer is the slowest)")
-    design.add_argument("--tasks", type=_names("task(s)", TASKS), default=list(TASKS), metavar="T,T",
+    design.add_argument("--tasks", type=names_type("task(s)", TASKS), default=list(TASKS), metavar="T,T",
                         help=f"tasks (default: {','.join(TASKS)})")
     design.add_argument("--zone", choices=("centre", "all"), default="centre",
                         help="centre zone only (DENALI) or every zone, for comparison (default: centre)")
@@ -185,7 +178,7 @@ def add(sub) -> None:
     design.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
     train = p.add_argument_group("training (as 'nlosplan benchmark')")
     add_training_options(train)
-    train.add_argument("--threads", type=_number(int), default=DEFAULT_THREADS, metavar="N",
+    train.add_argument("--threads", type=number_type(int), default=DEFAULT_THREADS, metavar="N",
                        help="torch CPU threads (default: %(default)s: one-zone models are too small to gain from "
                             "more, and extra threads stall on a busy machine)")
     out = p.add_argument_group("output")
