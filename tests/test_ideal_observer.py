@@ -54,7 +54,7 @@ def test_binomial_intervals():
     assert binomial_interval(0, 20)[0] == 0.0 and binomial_interval(20, 20)[1] == 1.0
     cp = binomial_interval(3, 30, method="clopper-pearson")
     assert cp[0] <= binomial_interval(3, 30)[0] and cp[1] >= binomial_interval(3, 30)[1]  # exact is conservative
-    with pytest.raises(UserError):
+    with pytest.raises(UserError, match="unknown interval method 'bayes'"):
         binomial_interval(1, 2, method="bayes")
 
 

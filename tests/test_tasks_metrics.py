@@ -47,7 +47,7 @@ def test_regression_pools_both_coordinates():
     assert m["rmse"] == pytest.approx(np.sqrt(0.05 / 4))
     assert m["mae"] == pytest.approx(0.3 / 4)
     assert m["x_mae"] == pytest.approx(0.05) and m["y_mae"] == pytest.approx(0.1)
-    with pytest.raises(UserError):
+    with pytest.raises(UserError, match=r"must both be \(N, 2\)"):
         regression_metrics(pred, true[:, :1])
 
 

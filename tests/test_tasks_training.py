@@ -110,7 +110,7 @@ def test_denali_config_mirrors_its_cells():
     c = denali_config("transformer", "shape")
     assert (c.lr, c.max_epochs, c.batch_size, c.log_transform, c.normalize) == (1e-5, 50, 256, True, True)
     assert denali_config("cnn3d", "size", max_epochs=3).max_epochs == 3
-    with pytest.raises(UserError):
+    with pytest.raises(UserError, match=r"val_fraction=1.0 must be in \[0, 1\)"):
         TrainConfig(val_fraction=1.0)
 
 
@@ -144,8 +144,9 @@ def test_load_refuses_files_that_need_pickle(tmp_path):
     with pytest.raises(UserError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
     (tmp_path / "junk.pt").write_bytes(b"not a torch file")
-    with pytest.raises(UserError):
+    with pytest.raises(UserError, match="refused: only checkpoints written by nlosplan are read") as err:
         load_checkpoint(tmp_path / "junk.pt")
+    assert "\n" not in str(err.value)
 
 
 def test_interrupted_save_keeps_the_previous_checkpoint(tmp_path, ds, monkeypatch):
