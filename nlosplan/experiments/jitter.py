@@ -35,14 +35,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.tasks.benchmark import DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL, run_benchmark
-from nlosplan.tasks.dataset import SCENE_KEYS, Dataset
-from nlosplan.tasks.models import MODEL_NAMES, TASKS
+from nlosplan.tasks.dataset import Dataset, scene_keys
+from nlosplan.tasks.models import MODEL_NAMES, TASKS, check_names
 from nlosplan.tasks.splits import SPLITS
 
 __all__ = ["DEFAULT_JITTER_PS", "DEFAULT_MODELS", "STUDY_ZONES", "ZONE_VIEWS", "JitterStudy", "level_summary",
@@ -56,14 +56,6 @@ DEFAULT_MODELS: tuple[str, ...] = ("mlp", "cnn1d")
 STUDY_ZONES = "3x3"
 #: Which zones the models see: the centre zone (DENALI's study) or all of them (a comparison).
 ZONE_VIEWS: tuple[str, ...] = ("centre", "all")
-
-
-def _names(kind: str, given, allowed: Sequence[str]) -> tuple[str, ...]:
-    given = [given] if isinstance(given, str) else list(given)
-    bad = [g for g in given if g not in allowed]
-    if bad or not given:
-        raise UserError(f"unknown {kind} {', '.join(map(repr, bad)) or '(none given)'}; allowed: {', '.join(allowed)}")
-    return tuple(dict.fromkeys(given))
 
 
 def _levels(values) -> tuple[float, ...]:
@@ -138,8 +130,8 @@ class JitterStudy:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "jitter_ps", _levels(self.jitter_ps))
-        object.__setattr__(self, "models", _names("model(s)", self.models, MODEL_NAMES))
-        object.__setattr__(self, "tasks", _names("task(s)", self.tasks, TASKS))
+        object.__setattr__(self, "models", tuple(check_names("model(s)", self.models, MODEL_NAMES)))
+        object.__setattr__(self, "tasks", tuple(check_names("task(s)", self.tasks, TASKS)))
         if self.zone not in ZONE_VIEWS:
             raise UserError(f"unknown zone view {self.zone!r}; allowed: {', '.join(ZONE_VIEWS)}")
         if self.split not in SPLITS:
@@ -259,7 +251,7 @@ def level_summary(dataset: Dataset) -> dict:
 
 
 def _n_scenes(dataset: Dataset) -> int:
-    return int(dataset.labels[list(SCENE_KEYS)].astype(str).drop_duplicates().shape[0])
+    return int(scene_keys(dataset.labels).nunique())
 
 
 def run_jitter_study(dataset: Dataset, config: JitterStudy | None = None,

@@ -30,7 +30,7 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.tasks.dataset import Dataset
 from nlosplan.tasks.metrics import BREAKDOWNS, breakdown_rows, position_quadrants
-from nlosplan.tasks.models import MODEL_NAMES, TASKS, n_parameters
+from nlosplan.tasks.models import MODEL_NAMES, TASK_LABEL, TASKS, check_names, n_parameters
 from nlosplan.tasks.splits import SPLITS, make_split, split_applies
 from nlosplan.tasks.training import TrainConfig, save_checkpoint, train_model
 
@@ -44,7 +44,6 @@ DEFAULT_PATIENCE = 5
 DEFAULT_WIDTH = 0.25
 #: Settings of the "small" run CI can afford (a few minutes on 2 CPU cores at DENALI's size).
 SMALL = {"epochs": 5, "width": 0.125}
-_LABEL = {"shape": "object", "size": "size"}
 
 
 #: DENALI's per-entry training settings (``benchmark/main_table/cells.py``):
@@ -107,14 +106,6 @@ def train_config(model: str, task: str, *, profile: str = "cpu", epochs: int | N
     return TrainConfig(lr=lr, batch_size=64, max_epochs=epochs or DEFAULT_EPOCHS, **common)
 
 
-def _check_names(kind: str, given: Sequence[str], allowed: Sequence[str]) -> list[str]:
-    given = [given] if isinstance(given, str) else list(given)
-    bad = [g for g in given if g not in allowed]
-    if bad or not given:
-        raise UserError(f"unknown {kind} {', '.join(map(repr, bad)) or '(none given)'}; allowed: {', '.join(allowed)}")
-    return list(dict.fromkeys(given))
-
-
 def _quadrants(labels) -> np.ndarray:
     """Near/far quadrant of every row (over the whole dataset); "" where x, y are unknown."""
     out = np.full(len(labels), "", dtype=object)
@@ -132,7 +123,7 @@ def _targets(ds: Dataset, task: str, classes) -> np.ndarray:
                             "have none (filter them out, e.g. by source)")
         return xy
     lookup = {c: i for i, c in enumerate(classes)}
-    return np.array([lookup[v] for v in ds.labels[_LABEL[task]].astype(str)], dtype=np.int64)
+    return np.array([lookup[v] for v in ds.labels[TASK_LABEL[task]].astype(str)], dtype=np.int64)
 
 
 def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, tasks: Sequence[str] = TASKS,
@@ -191,8 +182,8 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
     from nlosplan import __version__
 
     t0 = time.perf_counter()
-    models = _check_names("model(s)", models, MODEL_NAMES)
-    tasks = _check_names("task(s)", tasks, TASKS)
+    models = check_names("model(s)", models, MODEL_NAMES)
+    tasks = check_names("task(s)", tasks, TASKS)
     if split not in SPLITS:
         raise UserError(f"unknown split {split!r}; allowed: {', '.join(SPLITS)}")
     if not width > 0:
@@ -203,10 +194,10 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
     ds = dataset.mean_over_repeats() if average_repeats else dataset
     need_quadrant = any(c == "quadrant" for t in tasks for c, _ in BREAKDOWNS[t])
     quadrant = _quadrants(ds.labels) if need_quadrant else None
-    classes = {t: tuple(sorted(ds.labels[_LABEL[t]].astype(str).unique())) for t in tasks if t != "loc"}
+    classes = {t: tuple(sorted(ds.labels[TASK_LABEL[t]].astype(str).unique())) for t in tasks if t != "loc"}
     for t, names in classes.items():
         if len(names) < 2:
-            raise UserError(f"task {t!r} needs at least 2 classes of {_LABEL[t]}; the dataset has {', '.join(names)}")
+            raise UserError(f"task {t!r} needs at least 2 classes of {TASK_LABEL[t]}; the dataset has {', '.join(names)}")
     rows: list[dict] = []
     runs: list[dict] = []
     total = len(models) * len(tasks)
@@ -228,7 +219,7 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
             say({"event": "start", **base, "index": index, "total": total})
             train, test = ds.take(sp.train), ds.take(sp.test)
             trained = train_model(train.histograms, _targets(train, task, classes.get(task)) if task == "loc"
-                                  else train.labels[_LABEL[task]].astype(str).to_numpy(),
+                                  else train.labels[TASK_LABEL[task]].astype(str).to_numpy(),
                                   model=model, task=task, config=cfg, width=width, classes=classes.get(task),
                                   progress=lambda rec, b=base, i=index: say({"event": "epoch", **b, "index": i,
                                                                              "total": total, "record": rec}))

@@ -38,6 +38,11 @@ LABEL_COLUMNS = ("object", "size", "class_group", "position", "x", "y", "lights"
 SCENE_KEYS = ("object", "size", "position", "lights", "zones", "source")
 
 
+def scene_keys(labels: pd.DataFrame) -> pd.Series:
+    """One string per row naming its scene (:data:`SCENE_KEYS`); the repeats of a scene share it."""
+    return labels[list(SCENE_KEYS)].astype(str).agg("|".join, axis=1)
+
+
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """Histograms and labels.
@@ -109,8 +114,7 @@ class Dataset:
         """One row per scene: the mean of its repeats (DENALI averages the 3x3 repeats), ``repeat = -1``."""
         if len(self) == 0:
             return self
-        keys = self.labels[list(SCENE_KEYS)].astype(str).agg("|".join, axis=1)
-        groups = pd.Series(np.arange(len(self))).groupby(keys.to_numpy(), sort=False)
+        groups = pd.Series(np.arange(len(self))).groupby(scene_keys(self.labels).to_numpy(), sort=False)
         first = [g.iloc[0] for _, g in groups]
         hist = np.stack([self.histograms[g.to_numpy()].mean(axis=0) for _, g in groups])
         labels = self.labels.iloc[first].copy()

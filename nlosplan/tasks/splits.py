@@ -26,14 +26,14 @@ import pandas as pd
 from sklearn.model_selection import train_test_split
 
 from nlosplan.errors import UserError
-from nlosplan.tasks.dataset import SCENE_KEYS, Dataset
+from nlosplan.tasks.dataset import Dataset, scene_keys
+from nlosplan.tasks.models import TASK_LABEL, TASKS
 
 __all__ = ["SPLITS", "Split", "heldout_objects", "heldout_positions", "heldout_sizes", "make_split",
            "random_split", "split_applies", "stratified_split", "task_random_split"]
 
 #: Split kinds accepted by :func:`make_split` (``sizes:8in`` trains on 8 in).
 SPLITS: tuple[str, ...] = ("random", "positions", "objects", "sizes", "sizes:4in", "sizes:8in")
-_LABEL_OF_TASK = {"shape": "object", "size": "size"}
 
 
 @dataclass(frozen=True)
@@ -118,8 +118,7 @@ def stratified_split(y, *, test_size: float = 0.3, seed: int = 42) -> Split:
 
 def _scene_groups(labels: pd.DataFrame) -> np.ndarray:
     """Group number of every row: rows of one scene (its repeats) share it, numbered in order of appearance."""
-    keys = labels[list(SCENE_KEYS)].astype(str).agg("|".join, axis=1)
-    return pd.factorize(keys)[0]
+    return pd.factorize(scene_keys(labels))[0]
 
 
 def _rows_of(groups: np.ndarray, chosen: np.ndarray) -> np.ndarray:
@@ -136,7 +135,7 @@ def task_random_split(dataset: Dataset, task: str, *, test_size: float = 0.3, se
     if task == "loc":
         s = random_split(len(first), test_size=test_size, seed=seed)
     else:
-        s = stratified_split(dataset.labels[_LABEL_OF_TASK[task]].to_numpy()[first], test_size=test_size, seed=seed)
+        s = stratified_split(dataset.labels[TASK_LABEL[task]].to_numpy()[first], test_size=test_size, seed=seed)
     return Split(_rows_of(groups, s.train), _rows_of(groups, s.test), "random", s.info)
 
 
@@ -240,8 +239,8 @@ def make_split(dataset: Dataset, kind: str, task: str, *, seed: int = 42, test_s
     """
     if kind not in SPLITS:
         raise UserError(f"unknown split {kind!r}; allowed: {', '.join(SPLITS)}")
-    if task not in ("loc", "shape", "size"):
-        raise UserError(f"unknown task {task!r}; allowed: loc, shape, size")
+    if task not in TASKS:
+        raise UserError(f"unknown task {task!r}; allowed: {', '.join(TASKS)}")
     why = split_applies(kind, task)
     if why:
         raise UserError(f"split {kind!r} does not apply to task {task!r}: {why}")
