@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Sequence
 
-from nlosplan.cli.common import command_group, emit, progress_bar, sub_parser
+from nlosplan.cli.common import command_group, emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.simulators.fast.bench import (
     DEFAULT_LEVELS,
@@ -58,27 +58,11 @@ def _level_list(text: str) -> list[str]:
     return out
 
 
-def _int_in(lo: int, hi: int | None = None):
-    """An argparse type: an integer from ``lo`` to ``hi`` (no upper bound when None)."""
-
-    def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if n < lo or (hi is not None and n > hi):
-            raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: {lo} to {hi}" if hi is not None
-                                             else f"{n} must be >= {lo}")
-        return n
-
-    return parse
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Add the options of ``nlosplan bench simulate`` to ``parser``."""
     parser.add_argument("--levels", type=_level_list, default=list(DEFAULT_LEVELS),
                         help=f"comma-separated fidelity levels (default: {','.join(DEFAULT_LEVELS)})")
-    parser.add_argument("--positions", type=_int_in(1, N_POSITIONS), default=N_POSITIONS, metavar="N",
+    parser.add_argument("--positions", type=int_type(1, N_POSITIONS), default=N_POSITIONS, metavar="N",
                         help=f"batch over the first N of the {N_POSITIONS} DENALI positions (default: %(default)s)")
     parser.add_argument("--reference-positions", type=_int_list, default=None, metavar="P,P,...",
                         help="positions of the float64 reference (~10-20 s each; default: "
@@ -91,7 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"],
                         help="precision of the timed levels (default: %(default)s; the reference is float64)")
-    parser.add_argument("--repeats", type=_int_in(1), default=3, help="timed calls per figure, best kept (default: 3)")
+    parser.add_argument("--repeats", type=int_type(1), default=3, help="timed calls per figure, best kept (default: 3)")
     parser.add_argument("--plot", default=DEFAULT_PLOT, help="error-against-run-time PNG ('' for none; default: %(default)s)")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser

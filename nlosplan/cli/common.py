@@ -42,6 +42,22 @@ def number_type(cast, *, zero_ok: bool = False) -> Callable[[str], float]:
     return parse
 
 
+def int_type(lo: int, hi: int | None = None):
+    """An argparse type: an integer from ``lo`` to ``hi`` (no upper bound when None)."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if n < lo or (hi is not None and n > hi):
+            raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: {lo} to {hi}" if hi is not None
+                                             else f"{n} must be >= {lo}")
+        return n
+
+    return parse
+
+
 def parse_where(text: str | None) -> dict:
     """``lights=off,zones=3x3,object=A|S`` as ``{"lights": "off", "zones": "3x3", "object": ["A", "S"]}``."""
     where: dict = {}

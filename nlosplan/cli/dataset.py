@@ -5,9 +5,8 @@ from __future__ import annotations
 import argparse
 from contextlib import contextmanager
 
-from nlosplan.cli.common import command_group, emit, note, progress_bar, sub_parser
+from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, sub_parser
 
-_GROUPS = ("numbers", "letters", "shapes")
 
 
 # ----------------------------------------------------------------- option values
@@ -25,7 +24,7 @@ def _objects(text: str) -> list[str]:
         elif OBJECT_ALIASES.get(tok, tok) in DENALI_OBJECTS:
             out.append(OBJECT_ALIASES.get(tok, tok))
         else:
-            raise argparse.ArgumentTypeError(f"unknown object {tok!r}; allowed: all, {', '.join(_GROUPS)}, "
+            raise argparse.ArgumentTypeError(f"unknown object {tok!r}; allowed: all, {', '.join(CLASS_GROUPS)}, "
                                              f"{', '.join(DENALI_OBJECTS)}")
     return list(dict.fromkeys(out))
 
@@ -60,19 +59,6 @@ def _choices(allowed: tuple[str, ...]):
             raise argparse.ArgumentTypeError(f"{', '.join(bad) or repr(text)} not allowed; "
                                              f"allowed: {', '.join(allowed)}")
         return list(dict.fromkeys(out))
-
-    return parse
-
-
-def _int_from(lo: int):
-    def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if n < lo:
-            raise argparse.ArgumentTypeError(f"{n} must be >= {lo}")
-        return n
 
     return parse
 
@@ -235,13 +221,13 @@ def add(sub) -> None:
                    help="gantry positions, e.g. 0-99, 0,5,9 or 0-9,50-59 (default: 0-99)")
     b.add_argument("--lights", type=_choices(("on", "off")), default=["off"], metavar="on,off",
                    help="room lights (default: off)")
-    b.add_argument("--repeats", type=_int_from(1), default=3, help="Poisson captures per scene (default: 3)")
+    b.add_argument("--repeats", type=int_type(1), default=3, help="Poisson captures per scene (default: 3)")
     b.add_argument("--fidelity", type=_fidelity, default="default",
                    help="simulator level: draft, low, default, high, reference (default: default)")
     b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
                    help="object reflectance (default: retroreflective)")
-    b.add_argument("--seed", type=_int_from(0), default=0, help="build seed (default: 0)")
-    b.add_argument("--batch", type=_int_from(1), default=100, help="scenes per simulator call (default: 100)")
+    b.add_argument("--seed", type=int_type(0), default=0, help="build seed (default: 0)")
+    b.add_argument("--batch", type=int_type(1), default=100, help="scenes per simulator call (default: 100)")
     b.add_argument("--fsync", action="store_true",
                    help="fsync every commit (survives power cuts; a build resumes identically anyway)")
     b.add_argument("--json", action="store_true", help="machine-readable summary")

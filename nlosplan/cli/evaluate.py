@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 
-from nlosplan.cli.common import command_group, emit, note, number_type, sub_parser
-from nlosplan.cli.dataset import _choices, _fidelity, _int_from, _objects, _positions
+from nlosplan.cli.common import command_group, emit, int_type, note, number_type, sub_parser
+from nlosplan.cli.dataset import _choices, _fidelity, _objects, _positions
 from nlosplan.errors import UserError
 
 DEFAULT_SENSOR = "tmf8828-3x3-short"
@@ -221,7 +221,7 @@ def add(sub) -> None:
     _common(c, jitter=True)
     c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["8in"], metavar="4in,8in",
                    help="object sizes (default: 8in)")
-    c.add_argument("--repeats", type=_int_from(1), default=1,
+    c.add_argument("--repeats", type=int_type(1), default=1,
                    help="independent captures per scene (default: 1; the bound scales as 1/sqrt(repeats))")
     c.add_argument("--nuisance", type=_choices(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
                    help="nuisance parameters estimated with the position, among photon_scale, ambient, dark, "
@@ -235,9 +235,9 @@ def add(sub) -> None:
     _common(o, jitter=False)
     o.add_argument("--size", choices=("4in", "8in"), default="8in", help="object size of the shape task "
                                                                          "(default: 8in)")
-    o.add_argument("--draws", type=_int_from(1), default=100,
+    o.add_argument("--draws", type=int_type(1), default=100,
                    help="noisy captures per class (Monte-Carlo precision; default: 100)")
-    o.add_argument("--seed", type=_int_from(0), default=0, help="seed of the draws (default: 0)")
+    o.add_argument("--seed", type=int_type(0), default=0, help="seed of the draws (default: 0)")
     o.add_argument("--position-known", action="store_true", help="tell the observer the true position")
     o.add_argument("--shape-known", action="store_true", help="size task: tell the observer the object's shape")
     o.add_argument("--rule", choices=("marginal", "max"), default="marginal",

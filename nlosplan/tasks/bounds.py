@@ -18,6 +18,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -389,5 +390,4 @@ def localization_crlb(scene: Scene, sensor: SensorConfig, *, fidelity="default",
         raise UserError(f"scene must be a Scene (e.g. denali_scene(...)), not {type(scene).__name__}")
     batch = localization_crlb_batch([scene], sensor, fidelity=fidelity, repeats=repeats, nuisance=nuisance,
                                     axes=axes, zones=zones, cond_max=cond_max, chunk=1)
-    res = batch.results[0]
-    return CRLBResult(**{**{k: getattr(res, k) for k in res.__dataclass_fields__}, "seconds": batch.seconds})
+    return dataclasses.replace(batch.results[0], seconds=batch.seconds)

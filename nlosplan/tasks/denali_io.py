@@ -24,7 +24,6 @@ import json
 import os
 import re
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Callable
 
@@ -57,12 +56,12 @@ def load_positions(path=None) -> dict[int, tuple[float, float]]:
     Keys ``frame{N}_tag1`` give capture number ``N`` (DENALI's
     ``load_capture_number_to_location_mapping``); other keys are ignored.
     """
+    if path is None:
+        from nlosplan.simulators.presets.denali import positions_xy
+
+        return {p: (float(x), float(y)) for p, (x, y) in enumerate(positions_xy())}
     try:
-        if path is None:
-            text = (resources.files("nlosplan.simulators") / "data" / "denali" / "tag1_positions.json").read_text()
-        else:
-            text = Path(path).read_text(encoding="utf-8")
-        raw = json.loads(text)
+        raw = json.loads(Path(path).read_text(encoding="utf-8"))
         out = {}
         for key, value in raw.items():
             if key.startswith("frame"):

@@ -211,13 +211,7 @@ class CaptureStore:
         int
             The capture's id (the stored one's with ``exists="skip"``).
         """
-        if exists not in ("error", "skip"):
-            raise UserError(f"exists={exists!r} is not allowed; allowed: 'error', 'skip'")
-        srow = sensor_row(sensor)
-        rid, new = self._insert(capture_row(hist, labels, sensor, meta), srow)
-        if not new and exists == "error":
-            raise UserError(f"capture {capture_key(labels, sensor)} is stored already (id {rid})")
-        return rid
+        return self.put_many([(hist, labels)], sensor=sensor, meta=meta, exists=exists).ids[0]
 
     def put_many(self, items: Iterable, *, sensor: SensorConfig, meta: dict | None = None,
                  exists: str = "skip") -> Added:
