@@ -9,27 +9,14 @@ import json
 import numpy as np
 import pytest
 
-from nlosplan.cli import dataset
-from nlosplan.cli.common import EXAMPLES, Parser
-from nlosplan.errors import UserError
+from nlosplan.cli import build_parser, main
+from nlosplan.cli.common import EXAMPLES
 from nlosplan.tasks.store import CaptureStore
 
 
-def parser():
-    p = Parser(prog="nlosplan")
-    sub = p.add_subparsers(dest="command", parser_class=Parser)
-    dataset.add(sub)
-    return p
-
-
 def run(capsys, *argv):
-    """Exit code, stdout, stderr of one command (as ``nlosplan.cli.main`` reports them)."""
-    try:
-        args = parser().parse_args(list(argv))
-        code = int(args.func(args) or 0)
-    except UserError as exc:
-        print(f"nlosplan: error: {exc}", file=__import__("sys").stderr)
-        code = 2
+    """Exit code, stdout, stderr of one ``nlosplan`` command."""
+    code = main(list(argv))
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -123,7 +110,7 @@ def test_unreadable_or_missing_stores(capsys, tmp_path):
 @pytest.mark.parametrize("name", ["build", "import-denali", "export-denali", "info"])
 def test_help_shows_the_examples(capsys, name):
     with pytest.raises(SystemExit) as e:
-        parser().parse_args(["dataset", name, "--help"])
+        build_parser().parse_args(["dataset", name, "--help"])
     out = capsys.readouterr().out
     assert e.value.code == 0 and "example" in out
     examples = EXAMPLES[f"dataset {name}"]

@@ -106,7 +106,7 @@ def add_training_options(group) -> None:
                        help="early-stopping patience in epochs, 0 for none (default: %(default)s)")
     group.add_argument("--max-seconds", type=number_type(float), metavar="S", help="wall-clock budget per model")
     group.add_argument("--profile", choices=PROFILES, default="cpu",
-                       help="training settings: cpu (lr 1e-3, batch 64, log1p + z-score) or denali "
+                       help="training settings: cpu (lr 1e-3, Transformer 3e-4, batch 64, log1p + z-score) or denali "
                             "(its per-model lr, batch, epochs, preprocessing) (default: cpu)")
     group.add_argument("--keep-repeats", action="store_true", help="train on every repeat instead of their mean")
 
@@ -137,7 +137,7 @@ def add(sub) -> None:
     add_training_options(p)
     p.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
     p.add_argument("--threads", type=number_type(int), metavar="N", help="torch CPU threads (default: torch's)")
-    p.add_argument("--save-models", action="store_true", help="also write each model's checkpoint to OUT/models")
+    p.add_argument("--save-models", action="store_true", help="also write each model's checkpoint to OUT/models/{model}_{task}.pt")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print the whole result as JSON")
     p.set_defaults(func=_cmd_benchmark)

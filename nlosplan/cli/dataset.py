@@ -178,6 +178,15 @@ each, with noise seeds derived from the seed and the scene. Captures stored
 already are skipped, so an interrupted build resumes where it stopped and
 gives the same counts as an uninterrupted one."""
 
+EXPORT_DESCRIPTION = """\
+Write the captures of a store that match the filters in the public DENALI
+layout: ROOT/<obj>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata/
+spad_histogram/NNN.npy, shape (repeats, H, W, 128), and ROOT/tag1_positions.json
+with the (x, y) of every exported position. Averaged captures (repeat < 0)
+are never exported. An existing tag1_positions.json is merged. A file (or
+a position) that holds other data stops the export with an error unless
+--overwrite is given; equal files are left alone, so an export can be rerun."""
+
 IMPORT_DESCRIPTION = """\
 Import the real DENALI captures: spad_histogram/NNN.npy of every
 <object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata folder, one
@@ -227,7 +236,8 @@ def add(sub) -> None:
     b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
                    help="object reflectance (default: retroreflective)")
     b.add_argument("--seed", type=int_type(0), default=0, help="build seed (default: 0)")
-    b.add_argument("--batch", type=int_type(1), default=100, help="scenes per simulator call (default: 100)")
+    b.add_argument("--batch", type=int_type(1), default=100, help="scenes per simulator call (default: 100); keep it when resuming "
+                                                                   "(it fixes the float32 rounding of the means)")
     b.add_argument("--fsync", action="store_true",
                    help="fsync every commit (survives power cuts; a build resumes identically anyway)")
     b.add_argument("--json", action="store_true", help="machine-readable summary")
@@ -249,7 +259,8 @@ def add(sub) -> None:
     i.set_defaults(func=_cmd_import)
 
     e = sub_parser(dsub, "export-denali", "dataset export-denali",
-                   "write captures of a store in the DENALI folder layout, with tag1_positions.json")
+                   "write captures of a store in the DENALI folder layout, with tag1_positions.json",
+                   description=EXPORT_DESCRIPTION)
     e.add_argument("--store", required=True, help="capture store file")
     e.add_argument("--out", required=True, metavar="ROOT", help="output folder (created)")
     e.add_argument("--overwrite", action="store_true", help="replace files that hold other data")

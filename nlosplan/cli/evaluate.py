@@ -108,7 +108,8 @@ def _cmd_crlb(args) -> int:
         if len(bad_lines) > _MAX_SCENE_LINES:
             lines.append(f"  ... and {len(bad_lines) - _MAX_SCENE_LINES} more (--json lists them all)")
         lines.append("")
-    lines.append(batch.summary())
+    notes = sorted({n for r in batch.results for n in r.notes})
+    lines += [f"note: {n}" for n in notes] + [batch.summary()]
     emit(args, data, "\n".join(lines))
     return 0
 

@@ -166,7 +166,8 @@ def add(sub) -> None:
                       help="with --denali: allow capture files that need pickle (they may run code): trusted data only")
     design = p.add_argument_group("study")
     design.add_argument("--jitter-ps", type=_jitter_levels, default=list(DEFAULT_JITTER_PS), metavar="J,J",
-                        help=f"jitter FWHMs in ps (default: {','.join(f'{v:g}' for v in DEFAULT_JITTER_PS)})")
+                        help=f"jitter FWHMs in ps, sorted and without duplicates "
+                             f"(default: {','.join(f'{v:g}' for v in DEFAULT_JITTER_PS)})")
     design.add_argument("--models", type=names_type("model(s)", MODEL_NAMES), default=list(DEFAULT_MODELS), metavar="M,M",
                         help=f"models among {','.join(MODEL_NAMES)} (default: {','.join(DEFAULT_MODELS)}; one zone "
                              "leaves the 3D CNN nothing spatial, the Transformer is the slowest)")
