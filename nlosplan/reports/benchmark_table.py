@@ -15,7 +15,9 @@ from pathlib import Path
 
 import pandas as pd
 
-__all__ = ["benchmark_markdown", "benchmark_table", "benchmark_text", "runs_table", "write_benchmark"]
+from nlosplan.reports.tables import markdown_table
+
+__all__ = ["benchmark_markdown", "benchmark_table", "benchmark_text", "not_applicable", "runs_table", "write_benchmark"]
 
 TASK_TITLES = {"loc": "Localization (x, y), metres", "shape": "Shape classification (30-way), %",
                "size": "Size classification (4 in vs 8 in), %"}
@@ -100,11 +102,12 @@ def _header(result: dict) -> str:
             f"{result['seconds']:.0f} s")
 
 
-def _not_applicable(result: dict) -> list[str]:
+def not_applicable(result: dict) -> list[str]:
+    """A line per task whose entries did not run (e.g. a held-out split that does not apply), with the reason."""
     seen = {}
     for r in result["runs"]:
-        if r["status"] != "ok":
-            seen.setdefault(r["task"], r["reason"])
+        if r.get("status") != "ok":
+            seen.setdefault(r["task"], r.get("reason", ""))
     return [f"{task}: n/a ({why})" for task, why in seen.items()]
 
 
@@ -140,17 +143,10 @@ def benchmark_text(result: dict) -> str:
         if not any(r["task"] == task for r in result["rows"]):
             continue
         lines += ["", _title(result, task), _task_block_text(result, task).to_string(index=False)]
-    na = _not_applicable(result)
+    na = not_applicable(result)
     if na:
         lines += [""] + na
     return "\n".join(lines)
-
-
-def _markdown_table(df: pd.DataFrame) -> str:
-    head = "| " + " | ".join(map(str, df.columns)) + " |"
-    rule = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(str(v) for v in row) + " |" for row in df.itertuples(index=False)]
-    return "\n".join([head, rule, *body])
 
 
 def benchmark_markdown(result: dict) -> str:
@@ -159,11 +155,11 @@ def benchmark_markdown(result: dict) -> str:
     for task in result["config"]["tasks"]:
         if not any(r["task"] == task for r in result["rows"]):
             continue
-        parts += ["", f"## {_title(result, task)}", "", _markdown_table(_task_block(result, task).reset_index())]
+        parts += ["", f"## {_title(result, task)}", "", markdown_table(_task_block(result, task).reset_index())]
     runs = runs_table(result)
     shown = runs.assign(train_seconds=runs["train_seconds"].map(lambda v: "" if pd.isna(v) else f"{v:.1f}"),
                         seconds_per_epoch=runs["seconds_per_epoch"].map(lambda v: "" if pd.isna(v) else f"{v:.2f}"))
-    parts += ["", "## Training runs", "", _markdown_table(shown.fillna(""))]
+    parts += ["", "## Training runs", "", markdown_table(shown.fillna(""))]
     return "\n".join(parts) + "\n"
 
 

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from nlosplan.reports.benchmark_table import not_applicable
 from nlosplan.reports.figures import pyplot, save_figure
+from nlosplan.reports.tables import markdown_table
 
 __all__ = ["METRIC_ORDER", "jitter_markdown", "jitter_table", "jitter_text", "levels_table", "plot_jitter",
            "write_jitter"]
@@ -118,14 +120,6 @@ def _levels_display(result: dict) -> pd.DataFrame:
                          "total s": lv["seconds"].map("{:.1f}".format)})
 
 
-def _not_applicable(result: dict) -> list[str]:
-    seen = {}
-    for r in result["runs"]:
-        if r.get("status") != "ok":
-            seen.setdefault(r["task"], r.get("reason", ""))
-    return [f"{task}: n/a ({why})" for task, why in seen.items()]
-
-
 def jitter_text(result: dict) -> str:
     """The study for the terminal: the settings, a block per model (jitter rows, metric columns), the levels."""
     lines = [_header(result)]
@@ -134,15 +128,8 @@ def jitter_text(result: dict) -> str:
                   _model_block(result, model).to_string(index=False)]
     lines += ["", "levels (histograms fed to training: mean highest bin, width of the direct peak; timings)",
               _levels_display(result).to_string(index=False)]
-    na = _not_applicable(result)
+    na = not_applicable(result)
     return "\n".join(lines + ([""] + na if na else []))
-
-
-def _markdown(df: pd.DataFrame) -> str:
-    head = "| " + " | ".join(map(str, df.columns)) + " |"
-    rule = "|" + "|".join("---:" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(str(v) for v in row) + " |" for row in df.itertuples(index=False)]
-    return "\n".join([head, rule, *body])
 
 
 def jitter_markdown(result: dict, *, figure: str | None = None) -> str:
@@ -152,10 +139,10 @@ def jitter_markdown(result: dict, *, figure: str | None = None) -> str:
         parts += ["", f"![jitter study]({figure})"]
     for model in result["config"]["models"]:
         parts += ["", f"## {model}", "", "Localization in metres, classification in percent.", "",
-                  _markdown(_model_block(result, model))]
+                  markdown_table(_model_block(result, model), align="---:")]
     parts += ["", "## Levels", "", "Histograms fed to training (mean highest bin, width of the direct peak) "
-              "and timings.", "", _markdown(_levels_display(result))]
-    na = _not_applicable(result)
+              "and timings.", "", markdown_table(_levels_display(result), align="---:")]
+    na = not_applicable(result)
     if na:
         parts += ["", *[f"- {line}" for line in na]]
     return "\n".join(parts) + "\n"

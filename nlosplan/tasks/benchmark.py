@@ -207,6 +207,12 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
         sp = None if why else make_split(ds, split, task, seed=seed, test_size=test_size)
         if sp is not None and (len(sp.train) < 2 or len(sp.test) < 1):
             raise UserError(f"split {split!r} leaves {len(sp.train)} training and {len(sp.test)} test rows")
+        if sp is not None:  # the same data for every model of this task
+            train, test = ds.take(sp.train), ds.take(sp.test)
+            y_train = (_targets(train, task, classes.get(task)) if task == "loc"
+                       else train.labels[TASK_LABEL[task]].astype(str).to_numpy())
+            y_test = _targets(test, task, classes.get(task))
+            q_test = None if quadrant is None else quadrant[sp.test]
         for mi, model in enumerate(models):
             index = ti * len(models) + mi
             base = {"model": model, "task": task, "split": split}
@@ -217,16 +223,13 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
             cfg = train_config(model, task, profile=profile, epochs=epochs, patience=patience, seed=seed,
                                max_seconds=max_seconds)
             say({"event": "start", **base, "index": index, "total": total})
-            train, test = ds.take(sp.train), ds.take(sp.test)
-            trained = train_model(train.histograms, _targets(train, task, classes.get(task)) if task == "loc"
-                                  else train.labels[TASK_LABEL[task]].astype(str).to_numpy(),
-                                  model=model, task=task, config=cfg, width=width, classes=classes.get(task),
+            trained = train_model(train.histograms, y_train, model=model, task=task, config=cfg, width=width,
+                                  classes=classes.get(task),
                                   progress=lambda rec, b=base, i=index: say({"event": "epoch", **b, "index": i,
                                                                              "total": total, "record": rec}))
             t_eval = time.perf_counter()
             scores = trained.predict(test.histograms)
-            q = None if quadrant is None else quadrant[sp.test]
-            for r in breakdown_rows(task, test.labels, scores, _targets(test, task, classes.get(task)), quadrant=q):
+            for r in breakdown_rows(task, test.labels, scores, y_test, quadrant=q_test):
                 rows.append({"model": model, "task": task, **r})
             n_epochs = len(trained.history)
             runs.append({**base, "status": "ok", "reason": "", "train_seconds": trained.train_seconds,
