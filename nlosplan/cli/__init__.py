@@ -13,11 +13,24 @@ import argparse
 import sys
 
 from nlosplan import __version__
-from nlosplan.cli import bench, benchmark, check, dataset, evaluate, sensor, simulate, study
+import importlib
+
 from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
 from nlosplan.errors import UserError
 
-__all__ = ["EXIT_USAGE", "build_parser", "main"]
+__all__ = ["EXIT_USAGE", "ROOMS", "build_parser", "main"]
+
+# The subcommand modules of ``nlosplan``, in the order of ``--help``; each has ``add(sub)``.
+ROOMS: tuple[str, ...] = (
+    "sensor",
+    "simulate",
+    "check",
+    "bench",
+    "dataset",
+    "benchmark",
+    "study",
+    "evaluate",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,8 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"nlosplan {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
-    for room in (sensor, simulate, check, bench, dataset, benchmark, study, evaluate):
-        room.add(sub)
+    for name in ROOMS:
+        importlib.import_module(f"nlosplan.cli.{name}").add(sub)
     return p
 
 

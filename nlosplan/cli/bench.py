@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 from typing import Sequence
 
 from nlosplan.cli.common import command_group, emit, int_type, progress_bar, sub_parser
@@ -161,6 +162,13 @@ def add(sub) -> None:
                     description=BENCH_SIMULATE_DESCRIPTION)
     add_arguments(bs)
     bs.set_defaults(func=_cmd_bench_simulate)
+    for name in MORE_BENCHES:
+        importlib.import_module(f"nlosplan.cli.{name}").add_bench(bsub)
+
+
+# Further ``nlosplan bench NAME`` benchmarks, one module of nlosplan.cli each, with ``add_bench(bsub)``.
+MORE_BENCHES: tuple[str, ...] = (
+)
 
 
 BENCH_SIMULATE_DESCRIPTION = """\

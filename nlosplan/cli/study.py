@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import sys
 import time
@@ -188,3 +189,10 @@ def add(sub) -> None:
     out.add_argument("--json", action="store_true", help="print the whole result as JSON")
     out.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_cmd_jitter)
+    for name in MORE_STUDIES:
+        importlib.import_module(f"nlosplan.cli.{name}").add_study(ssub)
+
+
+# Further ``nlosplan study NAME`` studies, one module of nlosplan.cli each, with ``add_study(ssub)``.
+MORE_STUDIES: tuple[str, ...] = (
+)
