@@ -1,0 +1,1 @@
+"""Planners: sensor-design search (design/) and capture planning (capture/)."""
