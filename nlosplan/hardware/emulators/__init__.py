@@ -1,0 +1,7 @@
+"""Pty emulators of the rig's devices (the production drivers talk to them through real ptys)."""
+
+from nlosplan.hardware.emulators.faults import GantryFaults, SensorFaults
+from nlosplan.hardware.emulators.grbl import EmulatedGrbl
+from nlosplan.hardware.emulators.tmf8828 import EmulatedTMF8828
+
+__all__ = ["EmulatedGrbl", "EmulatedTMF8828", "GantryFaults", "SensorFaults"]
