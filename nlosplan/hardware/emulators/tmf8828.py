@@ -163,7 +163,8 @@ class EmulatedTMF8828(PtyDevice):
         peak = np.argmax(counts.reshape(-1, N_BINS), axis=1)
         flat_dist = np.rint((peak + 0.5) * bin_ps * C_MM_PER_PS).astype(np.int64)
         lines: list[str] = []
-        per = zones.dumps_per_result
+        per, nres = zones.dumps_per_result, zones.results_per_frame
+        self._result = -(-self._result // nres) * nres % 256  # sub-capture k has result_number % 4 == k
         for r in range(zones.results_per_frame):
             for d in dumps[r * per:(r + 1) * per]:
                 if self.dump_mode in (2, 3):
