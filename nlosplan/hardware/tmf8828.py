@@ -100,11 +100,35 @@ class TMF8828:
         self.transcript = []
         seq = start_sequence(zones, range_mode)
         for char in seq:
-            self.command(char)
+            self._toggle_until(char, self.command(char), zones, range_mode)
         self.zones, self.range_mode = zones, range_mode
         self.assembler = FrameAssembler(zones)
         self.measuring = True
         return self.firmware_config()
+
+    def _toggle_until(self, char: str, answer: list[str], zones: ZoneMode, range_mode: RangeMode) -> None:
+        """Press a toggle again while its answer says the firmware is not yet in the wanted state.
+
+        The firmware's ``z``, ``O`` and ``o`` cycle a state, so a firmware that
+        was not reset (no DTR reset on open) may start elsewhere: ``z``
+        answers ``Histogram is N`` (1 = raw), ``O`` names the range, ``o`` the
+        firmware. Answers not recognised are left alone.
+        """
+        for _ in range(4):
+            text = " ".join(answer).lower()
+            if char == "z" and "histogram is" in text:
+                again = text.split("histogram is")[1].strip()[:1] != "1"
+            elif char == "O" and ("short" in text) != ("long" in text):
+                again = ("short" in text) != (range_mode is RangeMode.SHORT)
+            elif char == "o" and ("8828 mode" in text) != ("882x mode" in text):
+                again = "882x mode" not in text
+            else:
+                return
+            if not again:
+                return
+            answer = self.command(char)
+        raise SensorError(f"TMF8828 on {self.port_name}: command {char!r} did not reach the wanted state "
+                          f"(last answer {' | '.join(answer)[:80]!r})")
 
     def firmware_config(self) -> dict:
         """What the sensor was started with (stored with every capture)."""

@@ -281,10 +281,10 @@ class _DumpBuilder:
         if n == 0:
             abandoned = self.next > 0
             self.next, self.address = 0, address
-        elif n != self.next:
+        elif n != self.next:   # a line lost or out of order: this dump cannot complete
             abandoned = self.next > 0
             self.next = -1
-            return None, True
+            return None, abandoned
         plane, ch = divmod(n, N_CHANNELS)
         self.planes[plane, ch] = values
         self.next += 1
