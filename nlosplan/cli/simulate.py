@@ -225,11 +225,15 @@ def _simulate_nlos(args, sensor) -> int:
     from nlosplan.simulators import simulate
 
     zones = None if args.only_zones is None else _parse_zones(args.only_zones)
+    backend = args.backend or "fast"
+    if backend == "mitsuba" and (args.explain or args.dtype):
+        raise UserError(f"{'--explain' if args.explain else '--dtype'} applies to the fast backend only, "
+                        "not to --backend mitsuba")
     scene = _nlos_scene(args)
     fidelity = args.fidelity or "default"
-    note(args, f"simulating {scene.name} with {sensor.name} (fidelity {fidelity}) ...")
+    note(args, f"simulating {scene.name} with {sensor.name} ({backend} backend, fidelity {fidelity}) ...")
     result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
-                                         fidelity=fidelity, zones=zones, **_given(args, dtype="dtype"))
+                                         fidelity=fidelity, zones=zones, backend=backend, **_given(args, dtype="dtype"))
     files = _save_nlos(result, _npy_path(args.out))
     if args.plot:
         labels = None if zones is None else [f"zone ({r},{c})" for r, c in zones]
@@ -359,8 +363,12 @@ def add(sub) -> None:
         help="object reflectance (default: retroreflective for denali, lambertian for corner)")
     add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: 0.5)")
     add("--lobe-deg", type=float, metavar="DEG", help="retroreflective lobe FWHM, degrees (default: 2)")
+    add("--backend", choices=["fast", "mitsuba"],
+        help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
+             "cuda_ad_rgb; e.g. --backend mitsuba --fidelity low takes ~10 s on 2 cores)")
     add("--fidelity", metavar="LEVEL",
-        help="quadrature level: draft, low, default, high or reference (default: default)")
+        help="quadrature level: draft, low, default, high or reference (default: default); "
+             "for --backend mitsuba the twin's levels (spp 16 to 4096)")
     add("--only-zones", metavar="R,C;R,C",
         help="compute only these zones, e.g. '1,1;0,2' (arrays become (zones, bins))")
     add("--explain", action="store_true", help="print the plan: terms computed and left out, with reasons")

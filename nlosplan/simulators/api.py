@@ -29,8 +29,8 @@ from nlosplan.simulators.fast.plan import SimPlan, build_plan
 from nlosplan.simulators.fast.simulator import FastSimulator
 from nlosplan.simulators.scene import NLOSWarning, Scene
 
-#: Backends that can be asked for by name.
-BACKENDS = ("fast",)
+#: Backends that can be asked for by name ("mitsuba": the Mitsuba 3 twin, imported only when asked for).
+BACKENDS = ("fast", "mitsuba")
 
 
 def _check(scene: Scene, sensor: SensorConfig, backend: str) -> None:
@@ -58,9 +58,12 @@ def expected_histogram(scene: Scene, sensor: SensorConfig, *, backend: str = "fa
     ----------
     scene : Scene
     sensor : SensorConfig
-    backend : {"fast"}
+    backend : {"fast", "mitsuba"}
+        ``mitsuba``: the Mitsuba 3 + mitransient twin (:mod:`nlosplan.simulators.mitsuba`,
+        seed 0; ``dtype`` and ``prune`` do not apply; result float64).
     fidelity : str, dict or Fidelity
-        ``draft``, ``low``, ``default``, ``high``, ``reference`` or knobs.
+        ``draft``, ``low``, ``default``, ``high``, ``reference`` or knobs
+        (the twin's knobs for ``mitsuba``: ``spp``, ``zone_sub``, ...).
     zones : list of (row, col), optional
         Only these zones.
     dtype : {"float32", "float64"}
@@ -72,6 +75,11 @@ def expected_histogram(scene: Scene, sensor: SensorConfig, *, backend: str = "fa
     ndarray, shape (rows, cols, n_bins), or (len(zones), n_bins)
         Expected counts (after pile-up and the 24-bit clip when enabled).
     """
+    if backend == "mitsuba":
+        _check(scene, sensor, backend)
+        from nlosplan.simulators.mitsuba.backend import expected as twin_expected
+
+        return twin_expected(scene, sensor, fidelity=fidelity, zones=zones)
     return _simulator(scene, sensor, backend, fidelity=fidelity, zones=zones, dtype=dtype, prune=prune).expected()
 
 
@@ -97,6 +105,12 @@ def sample(scene: Scene, sensor: SensorConfig, rng=0, repeats: int = 1, **kw) ->
     ndarray of int64, shape (repeats, rows, cols, n_bins) (or (repeats, zones, n_bins))
     """
     backend = kw.pop("backend", "fast")
+    if backend == "mitsuba":
+        _check(scene, sensor, backend)
+        from nlosplan.simulators.mitsuba.simulator import TwinSimulator
+
+        return TwinSimulator(scene, sensor, fidelity=kw.get("fidelity", "default"), zones=kw.get("zones")).sample(
+            rng, repeats)
     return _simulator(scene, sensor, backend, **kw).sample(rng, repeats)
 
 
@@ -160,6 +174,11 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
         Noisy captures to draw of each (with and without the object).
     Other parameters as :func:`expected_histogram`.
     """
+    if backend == "mitsuba":
+        _check(scene, sensor, backend)
+        from nlosplan.simulators.mitsuba.backend import simulate as twin_simulate
+
+        return twin_simulate(scene, sensor, rng=rng, repeats=repeats, fidelity=fidelity, zones=zones)
     t0 = time.perf_counter()
     if repeats and rng is None:
         raise UserError("give rng (a seed) to draw noisy captures")

@@ -53,10 +53,13 @@ def register(mi) -> None:
     from mitransient.sensors.nloscapturemeter import NLOSCaptureMeter
 
     class NlosPath(TransientNLOSPath):
-        def emitter_nee_sample(self, mode, scene, sampler, si, bsdf, bsdf_ctx, beta, distance, eta, depth,
-                               active_e, add_transient, **kwargs):
-            return super().emitter_nee_sample(mode, scene, sampler, si, bsdf, bsdf_ctx, beta, distance + 0.0, eta,
-                                              depth, active_e, add_transient, **kwargs)
+        def emitter_nee_sample(self, *args, **kwargs):
+            # the path length is the 8th positional parameter ('distance') of the parent's method
+            if "distance" in kwargs:
+                kwargs["distance"] = kwargs["distance"] + 0.0
+            else:
+                args = args[:7] + (args[7] + 0.0,) + args[8:]
+            return super().emitter_nee_sample(*args, **kwargs)
 
     class PointMeter(NLOSCaptureMeter):
         def __init__(self, props):
