@@ -30,6 +30,7 @@ ROOMS: tuple[str, ...] = (
     "benchmark",
     "study",
     "evaluate",
+    "rig",
 )
 
 

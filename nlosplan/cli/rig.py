@@ -1,0 +1,330 @@
+"""``nlosplan rig``: run capture plans on the rig (or on pty emulators), dry runs, run status."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib
+import json
+from pathlib import Path
+
+from nlosplan.cli.common import emit, int_type, number_type, progress_bar
+from nlosplan.errors import UserError
+
+# Further ``nlosplan rig NAME`` subcommands, one module of nlosplan.cli each, with ``add_rig(rsub)``.
+MORE_RIG_COMMANDS: tuple[str, ...] = (
+)
+
+EXAMPLES = {
+    "capture": (
+        "nlosplan rig capture --lidar /dev/ttyACM0 --gantry /dev/ttyUSB0 --plan raster --repeats 3 "
+        "--object A --size 8in --lights off --store runs.db",
+        "nlosplan rig capture --emulate --plan raster --positions 0-9 --repeats 3 --store out/emu.db --json",
+        "nlosplan rig capture --emulate --plan positions.csv --zones 8x8 --store out/emu.db "
+        "--emulate-faults garble=40,drop=300",
+    ),
+    "dry-run": (
+        "nlosplan rig dry-run --plan raster --repeats 3",
+        "nlosplan rig dry-run --plan positions.csv --limits 0:320,0:320 --json",
+    ),
+    "status": ("nlosplan rig status --store runs.db", "nlosplan rig status --store runs.db --run RUN_ID --json"),
+}
+FAULT_KEYS = {"garble": "garble_every", "truncate": "truncate_every", "drop": "drop_every",
+              "disconnect": "disconnect_after_frames", "slow": "slow_answer_s", "alarm": "alarm_on_move",
+              "slow-ok": "slow_ok_s"}
+
+
+def _sub(rsub, name: str, help_text: str, description: str | None = None) -> argparse.ArgumentParser:
+    lines = EXAMPLES[name]
+    return rsub.add_parser(name, help=help_text, description=description or help_text,
+                           epilog="examples:\n" + "\n".join(f"  {e}" for e in lines),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _range_list(text: str) -> list[int]:
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        lo, sep, hi = part.partition("-")
+        try:
+            a, b = int(lo), int(hi) if sep else int(lo)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: use grid indices like 0-9,20,45") from None
+        if not (0 <= a <= b <= 99):
+            raise argparse.ArgumentTypeError(f"{part!r}: grid indices run from 0 to 99")
+        out += range(a, b + 1)
+    if not out:
+        raise argparse.ArgumentTypeError("give at least one grid index")
+    return list(dict.fromkeys(out))
+
+
+def _limits(text: str):
+    try:
+        (x0, x1), (y0, y1) = [tuple(float(v) for v in axis.split(":")) for axis in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: use XMIN:XMAX,YMIN:YMAX in mm, e.g. 0:320,0:320") from None
+    if not (x0 < x1 and y0 < y1):
+        raise argparse.ArgumentTypeError(f"{text!r}: each minimum must be below its maximum")
+    return (x0, x1), (y0, y1)
+
+
+def _faults(text: str) -> dict:
+    out = {}
+    for item in text.split(","):
+        if not item.strip():
+            continue
+        key, _, val = item.partition("=")
+        if key.strip() not in FAULT_KEYS:
+            raise argparse.ArgumentTypeError(f"unknown fault {key!r}; allowed: {', '.join(FAULT_KEYS)}")
+        try:
+            v = float(val)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"fault {key}={val!r} needs a number") from None
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"fault {key}={val} must be >= 0")
+        out[FAULT_KEYS[key.strip()]] = v
+    return out
+
+
+def _plan_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plan", default="raster", metavar="raster|FILE",
+                   help="'raster' (DENALI's 10x10 snake) or a positions file (CSV/text 'x_mm,y_mm' lines, or JSON)")
+    p.add_argument("--positions", type=_range_list, default=None, metavar="0-9,45",
+                   help="raster only: these grid indices, in this order (default: all 100)")
+    p.add_argument("--repeats", type=int_type(1, 1000), default=3, help="captures per position (default: 3)")
+    p.add_argument("--settle", type=number_type(float, zero_ok=True), default=0.5, metavar="S",
+                   help="seconds to wait after each move (default: 0.5)")
+    p.add_argument("--limits", type=_limits, default=((0.0, 320.0), (0.0, 320.0)), metavar="X0:X1,Y0:Y1",
+                   help="gantry soft limits in mm (default: 0:320,0:320)")
+    p.add_argument("--feed", type=number_type(float), default=3000.0, help="feed rate, mm/min (default: 3000)")
+    p.add_argument("--object", default="A", help="hidden object label (default: A)")
+    p.add_argument("--size", default="8in", help="object size label (default: 8in)")
+    p.add_argument("--zones", default="3x3", choices=["3x3", "4x4", "8x8"], help="TMF8828 zones (default: 3x3)")
+    p.add_argument("--range", dest="range_mode", default="short", choices=["short", "long"],
+                   help="ranging mode (default: short)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+
+
+def _build_plan(args):
+    """(plan factory, description, spec, total captures)."""
+    from nlosplan.hardware.plans import positions_plan, raster_plan, read_positions
+
+    if args.plan == "raster":
+        positions = args.positions or list(range(100))
+        spec = {"kind": "raster", "positions": positions, "repeats": args.repeats, "settle_s": args.settle}
+        desc = f"raster {len(positions)} positions x {args.repeats}"
+
+        def factory():
+            return raster_plan(repeats=args.repeats, settle_s=args.settle, positions=positions)
+    else:
+        if args.positions is not None:
+            raise UserError("--positions selects raster grid indices; with a positions file, edit the file")
+        points = read_positions(args.plan)
+        spec = {"kind": "positions", "points": [list(p) for p in points], "repeats": args.repeats,
+                "settle_s": args.settle}
+        desc = f"{Path(args.plan).name}: {len(points)} positions x {args.repeats}"
+
+        def factory():
+            return positions_plan(points, repeats=args.repeats, settle_s=args.settle)
+    return factory, desc, spec, len(spec.get("positions") or spec.get("points")) * args.repeats
+
+
+def _view_check(args):
+    from nlosplan.hardware.executor import view_problem
+    from nlosplan.hardware.rig import sensor_preset
+
+    if getattr(args, "sensor_config", None) is not None:
+        cfg = args.sensor_config
+    else:
+        cfg = sensor_preset(args.zones, args.range_mode)
+    from nlosplan.simulators.presets.denali import DENALI_OBJECTS
+
+    obj = args.object if args.object in DENALI_OBJECTS else "A"
+    return lambda x, y: view_problem(cfg, obj, args.size if args.size in ("4in", "8in") else "8in", x, y)
+
+
+def _dry(args, factory):
+    from nlosplan.hardware.executor import dry_run
+
+    return dry_run(factory(), limits_mm=args.limits, feed_mm_min=args.feed,
+                   view=None if args.no_view_check else _view_check(args))
+
+
+def _cmd_dry_run(args) -> int:
+    factory, desc, spec, total = _build_plan(args)
+    rep = _dry(args, factory)
+    data = {"plan": desc, **rep.to_dict()}
+    lines = [f"plan: {desc}", f"{len(rep.moves)} moves, {rep.captures} captures, travel {rep.travel_mm:.0f} mm, "
+             f"about {rep.seconds / 60:.1f} min at {args.feed:g} mm/min"]
+    lines += [f"  move {i + 1:3d}: ({x:7.2f}, {y:7.2f}) mm, settle {s:g} s" for i, (x, y, s) in enumerate(rep.moves[:20])]
+    if len(rep.moves) > 20:
+        lines.append(f"  ... {len(rep.moves) - 20} more moves")
+    lines += [f"problem: {p}" for p in rep.problems] or ["checks: every target within the limits"
+                                                         + ("" if args.no_view_check else
+                                                            ", object never in the LiDAR's direct view")]
+    emit(args, data, "\n".join(lines))
+    if rep.problems:
+        raise UserError(f"the plan has {len(rep.problems)} problem(s); first: {rep.problems[0]}")
+    return 0
+
+
+def _run_id(args, spec: dict) -> str:
+    if args.run:
+        return args.run
+    blob = json.dumps({"spec": spec, "object": args.object, "size": args.size, "lights": args.lights,
+                       "zones": args.zones, "range": args.range_mode, "emulated": args.emulate}, sort_keys=True)
+    kind = spec["kind"]
+    return f"{kind}-{args.object}-{args.size}-{args.lights}-{args.zones}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
+
+
+def _cmd_capture(args) -> int:
+    from nlosplan.hardware.executor import Executor, RunContext
+    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
+    from nlosplan.hardware.tmf8828 import SensorError
+    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
+    from nlosplan.tasks.store import CaptureStore
+
+    if not args.emulate and not (args.lidar and args.gantry):
+        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
+    if args.emulate_faults and not args.emulate:
+        raise UserError("--emulate-faults needs --emulate")
+    factory, desc, spec, total = _build_plan(args)
+    rep = _dry(args, factory)
+    if rep.problems:
+        raise UserError(f"nothing moved: the plan has {len(rep.problems)} problem(s); first: {rep.problems[0]} "
+                        "(see 'nlosplan rig dry-run')")
+    run_id = _run_id(args, spec)
+    ctx = RunContext(args.object, args.size, class_group=args.class_group, lights=args.lights == "on",
+                     source="emulated:rig" if args.emulate else "rig", plan=desc, plan_total=total, plan_spec=spec)
+    pause = (lambda: Path(args.pause_file).exists()) if args.pause_file else None
+    summary = None
+    with CaptureStore(args.store) as store, _open(args) as rig, \
+            progress_bar(args, total, f"rig {run_id}", "capture") as bar:
+        ex = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
+                      on_capture=(lambda r: bar.update(1)) if bar is not None else None, pause_when=pause)
+        try:
+            summary = ex.run(factory())
+        except (GrblAlarm, GrblError, SensorError, ConnectionLost, DeviceTimeout) as exc:
+            s = ex.summary
+            raise UserError(f"run {run_id} stopped at step {max(s.steps - 1, 0)}: {exc}; {s.captured} new captures "
+                            f"stored ({s.resumed} found stored); fix it and rerun the same command to resume "
+                            f"[{'; '.join(s.finalize)}]") from None
+    data = {"store": str(args.store), **summary.to_dict()}
+    text = (f"run {run_id}: {summary.captured} captured, {summary.resumed} already stored, {summary.moves} moves, "
+            f"{summary.retries} retries in {summary.seconds:.1f} s -> {args.store}\n"
+            f"sensor: {summary.sensor_stats.get('frames', 0)} frames read, "
+            f"{summary.sensor_stats.get('dropped_frames', 0)} dropped, "
+            f"{summary.sensor_stats.get('garbage_lines', 0)} garbage lines\nfinalize: {'; '.join(summary.finalize)}")
+    emit(args, data, text)
+    return 0
+
+
+def _open(args):
+    from contextlib import contextmanager
+
+    from nlosplan.hardware.lights import FixedLights
+    from nlosplan.hardware.rig import emulated_rig, open_rig
+
+    park = None if args.no_park else (args.limits[0][0], args.limits[1][0])
+    if args.emulate:
+        from nlosplan.hardware.emulators import GantryFaults, SensorFaults
+
+        f = args.emulate_faults or {}
+        sf = SensorFaults(**{k: (int(v) if k != "slow_answer_s" else v) for k, v in f.items()
+                             if k in SensorFaults.__dataclass_fields__})
+        gf = GantryFaults(**{k: (int(v) if k != "slow_ok_s" else v) for k, v in f.items()
+                             if k in GantryFaults.__dataclass_fields__})
+        return emulated_rig(obj=args.object, size=args.size, zones=args.zones, range_mode=args.range_mode,
+                            lights=args.lights == "on", seed=args.seed, time_scale=args.time_scale,
+                            sensor_faults=sf, gantry_faults=gf, limits_mm=args.limits, feed_mm_min=args.feed,
+                            park_mm=park, home=args.home, unlock=args.unlock)
+
+    @contextmanager
+    def real():
+        rig = open_rig(args.lidar, args.gantry, zones=args.zones, range_mode=args.range_mode, baudrate=args.baud,
+                       limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
+                       home=args.home, unlock=args.unlock, park_mm=park)
+        try:
+            yield rig
+        finally:
+            rig.close()
+
+    return real()
+
+
+def _cmd_status(args) -> int:
+    from nlosplan.hardware.status import run_status
+    from nlosplan.tasks.store import CaptureStore
+
+    with CaptureStore(args.store, create=False) as store:
+        rows = run_status(store, args.run)
+    lines = []
+    for r in rows:
+        planned = "?" if r["planned"] is None else r["planned"]
+        left = "?" if r["left"] is None else r["left"]
+        lines.append(f"{r['run_id']}: {r['captured']}/{planned} captured, {left} left ({r['plan']}; "
+                     f"{r['object']}, lights {'/'.join(r['lights'])}, {r['source']}; last {r['last_utc']})")
+        lines += [f"  missing step {m['step']}: ({m['x_mm']}, {m['y_mm']}) mm repeat {m['repeat']}"
+                  for m in r["missing"]]
+    emit(args, {"store": str(args.store), "runs": rows}, "\n".join(lines) or f"no rig runs in {args.store}")
+    return 0
+
+
+def add(sub) -> None:
+    """The ``rig`` subcommand: ``capture``, ``dry-run``, ``status`` (and MORE_RIG_COMMANDS)."""
+    from nlosplan.cli.common import command_group
+
+    rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL gantry), or its pty emulators",
+                         "Drive the capture rig: a TMF8828 on the ams Arduino firmware and a GRBL 1.1 gantry, "
+                         "or, with --emulate, pty emulators of both backed by the fast simulator.")
+    c = _sub(rsub, "capture", "run a capture plan, every capture stored once (rerun the same command to resume)",
+             CAPTURE_DESCRIPTION)
+    c.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port (or pyserial URL)")
+    c.add_argument("--gantry", metavar="PORT", help="GRBL serial port (or pyserial URL)")
+    c.add_argument("--emulate", action="store_true", help="run on pty emulators of both devices (same driver code)")
+    c.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
+    c.add_argument("--run", default=None, help="run id (default: derived from the plan and labels, so a rerun resumes)")
+    _plan_options(c)
+    c.add_argument("--class-group", default=None, help="class group of a non-DENALI object")
+    c.add_argument("--lights", default="off", choices=["on", "off"], help="room lights during the run (default: off)")
+    c.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
+                   help="TMF8828 firmware baud rate (default: 2000000, DENALI's)")
+    c.add_argument("--home", action="store_true", help="home the gantry ($H) before the run")
+    c.add_argument("--unlock", action="store_true", help="clear a gantry alarm with $X (only if you know where it is)")
+    c.add_argument("--no-park", action="store_true", help="do not park the gantry at the limits' minimum at the end")
+    c.add_argument("--no-view-check", action="store_true",
+                   help="skip the check that the object never enters the LiDAR's direct view (DENALI geometry)")
+    c.add_argument("--pause-file", default=None, metavar="PATH",
+                   help="pause at the next position while this file exists")
+    c.add_argument("--seed", type=int, default=0, help="--emulate: noise seed (default: 0)")
+    c.add_argument("--time-scale", type=number_type(float), default=20.0,
+                   help="--emulate: emulated motion runs this much faster (default: 20)")
+    c.add_argument("--emulate-faults", type=_faults, default=None, metavar="K=V,...",
+                   help=f"--emulate: inject faults ({', '.join(FAULT_KEYS)}), e.g. garble=40,drop=300,disconnect=5")
+    c.set_defaults(func=_cmd_capture)
+    d = _sub(rsub, "dry-run", "list a plan's moves and check limits and direct view before anything moves")
+    _plan_options(d)
+    d.add_argument("--no-view-check", action="store_true", help="skip the direct-view check")
+    d.set_defaults(func=_cmd_dry_run)
+    s = _sub(rsub, "status", "what each rig run in a store has captured and what is left")
+    s.add_argument("--store", required=True, help="capture store")
+    s.add_argument("--run", default=None, help="one run id (default: every run)")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=_cmd_status)
+    for name in MORE_RIG_COMMANDS:
+        importlib.import_module(f"nlosplan.cli.{name}").add_rig(rsub)
+
+
+CAPTURE_DESCRIPTION = """\
+Run a capture plan on the rig and store every capture (one SQLite transaction
+each, with run id, step, commanded and reported gantry position, sensor and
+firmware configuration, timestamps, lights, repeat). The plan is checked dry
+first (limits, object never in the LiDAR's direct view); nothing moves if it
+fails. The sensor is stopped and the gantry parked at the end, also on errors
+and Ctrl-C. Rerunning the same command resumes the run: stored captures are
+skipped, nothing is taken twice. A lost sensor link is reconnected and the
+frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
+--home). With --emulate, both devices are pty emulators (DENALI scene, fast
+simulator) driven by the same code; motion runs --time-scale times faster."""
