@@ -22,13 +22,14 @@ STRATEGIES = ("raster", "random", "active", "active-motion", "doptimal", "doptim
 
 
 def raster_order(points_mm) -> np.ndarray:
-    """DENALI's snake over candidates: the 10 x 10 grid points by position index when present, else
-    every candidate row by row (increasing y), alternating direction. Returns candidate indices."""
+    """DENALI's snake over candidates: its 10 x 10 grid points by position index when all 100 are
+    candidates, else every candidate row by row (increasing y), alternating direction. Returns
+    candidate indices."""
     from nlosplan.hardware.geometry import grid_index
 
     pts = np.asarray(points_mm, dtype=np.float64)
     grid = np.array([grid_index(x, y) for x, y in pts])
-    if (grid >= 0).any():
+    if len(set(grid[grid >= 0].tolist())) == 100:
         on = np.flatnonzero(grid >= 0)
         return on[np.argsort(grid[on], kind="stable")]
     rows = np.unique(np.round(pts[:, 1], 6))

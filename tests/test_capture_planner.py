@@ -1,0 +1,117 @@
+"""Ask/tell capture planner on a synthetic counts model: suggest/ingest, failures, budget, checkpoint and resume."""
+
+import json
+
+import numpy as np
+import pytest
+
+from capture_synthetic import synthetic_space
+from nlosplan.errors import UserError
+from nlosplan.planner.capture import CapturePlanner, PlannerConfig, fit_calibration
+from nlosplan.planner.capture.strategies import raster_order
+
+
+def observe(space, index, rng, theta=None):
+    lam = space.counts(theta, [index])[0]
+    return rng.poisson(np.broadcast_to(lam, (space.repeats,) + lam.shape)).mean(axis=0)
+
+
+def run(planner, space, rng, rounds, fail=()):
+    for _ in range(rounds):
+        batch = planner.suggest()
+        if not batch:
+            break
+        planner.ingest([{"id": p["id"], "error": "gantry alarm 2"} if p["index"] in fail else
+                        {"id": p["id"], "histogram": observe(space, p["index"], rng)} for p in batch])
+
+
+@pytest.mark.parametrize("strategy", ["random", "active", "active-motion", "doptimal", "doptimal-motion"])
+def test_checkpoint_and_resume_give_the_same_next_batch(tmp_path, strategy):
+    space = synthetic_space()
+    a = CapturePlanner(space, PlannerConfig(strategy=strategy, batch_size=3, seed=4))
+    run(a, space, np.random.default_rng(0), 2)
+    path = a.save(tmp_path / "plan.json")
+    b = CapturePlanner.load(path, space)
+    assert json.loads(path.read_text())["format"] == "nlosplan-capture-planner/1"
+    na, nb = a.suggest(), b.suggest()
+    assert [p["index"] for p in na] == [p["index"] for p in nb]
+    assert [p["id"] for p in na] == [p["id"] for p in nb]
+    assert len({p["index"] for p in na} | {o["index"] for o in a.observations}) == 9  # no repeats
+    np.testing.assert_allclose(a.calibration()["theta"], b.calibration()["theta"])
+
+
+def test_failed_captures_are_recorded_retried_then_given_up():
+    space = synthetic_space()
+    planner = CapturePlanner(space, PlannerConfig(strategy="raster", batch_size=5))
+    run(planner, space, np.random.default_rng(1), 12, fail={2})
+    assert [f["index"] for f in planner.failures] == [2, 2]
+    assert all(f["reason"] == "gantry alarm 2" for f in planner.failures)
+    assert 2 not in planner.captured and len(planner.captured) == space.size - 1
+    assert planner.finished == "no candidate positions left"
+    assert planner.suggest() == []
+
+
+def test_budget_stops_the_planner_with_a_reason():
+    space = synthetic_space()
+    planner = CapturePlanner(space, PlannerConfig(strategy="active", batch_size=4, budget=6))
+    first = planner.suggest()
+    assert len(first) == 4
+    planner.ingest([{"id": p["id"], "histogram": observe(space, p["index"], np.random.default_rng(2))} for p in first])
+    second = planner.suggest()
+    assert len(second) == 2  # cut to the budget left
+    assert planner.suggest() == [] and planner.finished is None  # pending captures: not finished yet
+    planner.ingest([{"id": p["id"], "histogram": observe(space, p["index"], np.random.default_rng(3))} for p in second])
+    assert planner.suggest() == [] and planner.finished == "budget of 6 captures spent"
+    assert planner.best()["captures"] == 6
+
+
+def test_ingest_rejects_unknown_ids_twice_ingested_and_bad_histograms():
+    space = synthetic_space()
+    planner = CapturePlanner(space, PlannerConfig(strategy="random", batch_size=2))
+    batch = planner.suggest()
+    with pytest.raises(UserError, match="capture id 'nope' was not proposed"):
+        planner.ingest([{"id": "nope", "histogram": np.zeros(48)}])
+    with pytest.raises(UserError, match="histogram must hold 48 finite counts, got 3"):
+        planner.ingest([{"id": batch[0]["id"], "histogram": [1, 2, 3]}])
+    planner.ingest([{"id": batch[0]["id"], "histogram": np.ones(48)}])
+    with pytest.raises(UserError, match="already ingested"):
+        planner.ingest([{"id": batch[0]["id"], "histogram": np.ones(48)}])
+
+
+def test_resume_refuses_other_candidates_and_other_files(tmp_path):
+    space = synthetic_space()
+    path = CapturePlanner(space, PlannerConfig(strategy="random")).save(tmp_path / "p.json")
+    with pytest.raises(UserError, match="other candidate positions"):
+        CapturePlanner.load(path, synthetic_space(n=4))
+    (tmp_path / "x.json").write_text("{}")
+    with pytest.raises(UserError, match="not a capture-planner checkpoint"):
+        CapturePlanner.load(tmp_path / "x.json", space)
+    with pytest.raises(UserError, match="unknown planner strategy 'best'"):
+        PlannerConfig(strategy="best")
+
+
+def test_raster_is_a_snake_and_the_route_of_other_batches_starts_near_the_gantry():
+    space = synthetic_space(n=3)
+    order = raster_order(space.points_mm)
+    assert space.points_mm[order].tolist() == [[0, 0], [80, 0], [160, 0], [160, 80], [80, 80], [0, 80],
+                                               [0, 160], [80, 160], [160, 160]]
+    planner = CapturePlanner(space, PlannerConfig(strategy="random", batch_size=9, seed=3))
+    batch = planner.suggest()
+    assert batch[0]["x_mm"] + batch[0]["y_mm"] <= 80  # nearest neighbour from (0, 0) first
+
+
+def test_calibration_fit_recovers_the_truth_and_doptimal_beats_raster_early():
+    space = synthetic_space()
+    truth = np.array([0.002, -0.001, 0.05, -0.1])
+    rng = np.random.default_rng(5)
+    idx = np.arange(space.size)
+    obs = np.array([observe(space, i, rng, truth) for i in idx])
+    fit = fit_calibration(space, idx, obs)
+    assert np.all(np.abs(fit["theta"] - truth) <= 4 * fit["std"])
+    assert fit["identifiable"]
+    det = {}
+    for strategy in ("raster", "doptimal"):
+        planner = CapturePlanner(space, PlannerConfig(strategy=strategy, batch_size=4))
+        run(planner, space, np.random.default_rng(6), 1)
+        det[strategy] = np.linalg.slogdet(planner.calibration()["fisher"])[1]
+    assert det["doptimal"] > det["raster"]
