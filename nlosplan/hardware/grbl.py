@@ -244,7 +244,7 @@ class Grbl:
         self.alarm = None
 
     # ------------------------------------------------------------------ real-time
-    def status(self, timeout: float | None = None) -> Status:
+    def status(self, timeout: float | None = None, context: str = "while polling status") -> Status:
         """Poll ``?`` and return the report.
 
         Raises
@@ -259,7 +259,7 @@ class Grbl:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise DeviceTimeout(f"gantry on {self.port_name}: no status report within {timeout:g} s")
-            kind = self._handle(self._reader.readline(left), "while polling status")
+            kind = self._handle(self._reader.readline(left), context)
             if kind == "status":
                 return self.last_status
 
@@ -276,7 +276,7 @@ class Grbl:
         timeout = self.move_timeout if timeout is None else timeout
         deadline = time.monotonic() + timeout
         while True:
-            st = self.status()
+            st = self.status(context=context)
             if st.state == "Idle":
                 return st
             if st.state == "Alarm":
