@@ -115,7 +115,10 @@ class Grbl:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise DeviceTimeout(f"gantry on {self.port_name}: no 'ok' for {line!r} within {timeout:g} s")
-            got = self._reader.readline(left)
+            try:
+                got = self._reader.readline(left)
+            except DeviceTimeout:
+                continue
             kind = self._handle(got, f"after {line!r}")
             if kind == "ok":
                 return out
