@@ -158,6 +158,8 @@ class Executor:
         self._want_lights = bool(context.lights)
         self._view_ok: dict = {}
         self._step = 0
+        ids = store.labels(source=context.source)["capture_id"] if store.count(source=context.source) else []
+        self._run_ids = {c for c in ids if c.startswith(f"{run_id}/")}   # this run's stored steps
 
     # ------------------------------------------------------------------ pause
     def request_pause(self) -> None:
@@ -257,7 +259,7 @@ class Executor:
         self.summary.steps = self._step
         labels = self._labels(cmd, step)
         key = capture_key(labels, self.rig.sensor_config)
-        if self.store.has(key):
+        if self.store.has(key) or capture_id(self.run_id, step) in self._run_ids:
             result = self._stored(key, step, cmd)
             self.summary.resumed += 1
         else:
