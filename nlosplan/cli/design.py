@@ -1,0 +1,144 @@
+"""``nlosplan design``: the least hardware that does each NLOS task (the main job)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
+from nlosplan.errors import UserError
+
+DEFAULT_OUT = "nlosplan-out/design"
+
+DESCRIPTION = """\
+Find the least sensor hardware (zones, bin width, bins, timing jitter, pulse width,
+photon budget) that does each NLOS task on the DENALI rig, and write a report.
+
+With no options: the DENALI preset (tmf8828-3x3-short as the reference), the three
+tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
+size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
+32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 15 minutes on
+2 cores; --quick runs a reduced space in about 2 minutes.
+
+How: designs are emulated from simulated references (one per zone layout) by degrading
+histograms (jitter, bin merging, truncation, photon scaling). Fast bounds (Cramer-Rao
+bound, ideal observer) screen the space; DENALI's MLP trained on captures of a design
+verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout and bin
+width with the bound corrected by the measured bound-to-trained gap; the cheapest
+candidates are verified over several seeds. With --real, the trained evaluator uses real
+captures from a store instead (designs finer than the captures are reported unreachable).
+
+Output (OUT): report.html (self-contained), report.md, PNG plots, result.json,
+design_checkpoint.json (every evaluation; --resume continues from it).
+JSON: {"requirements": [{"task", "parameter", "minimum" or "maximum", "interval",
+"feasible"}...], "cheapest": [...], "report": PATH}."""
+
+
+def _requirement(text: str):
+    from nlosplan.planner.design.requirements import parse_requirement
+
+    try:
+        return parse_requirement(text)
+    except UserError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_config(args):
+    """The :class:`DesignConfig` of the parsed options."""
+    from dataclasses import replace
+
+    from nlosplan.planner.design.config import full_config, load_config, quick_config
+
+    cfg = quick_config() if args.quick else full_config()
+    if args.config:
+        cfg = load_config(args.config, cfg)
+    if args.requirement:
+        cfg = replace(cfg, requirements=tuple(args.requirement))
+    if args.seeds is not None:
+        cfg = replace(cfg, search=replace(cfg.search, seeds=args.seeds))
+    if args.real:
+        where = None
+        if args.where:
+            from nlosplan.cli.common import parse_where
+
+            where = parse_where(args.where)
+        cfg = replace(cfg, real=args.real, real_where=where, capture_sensor=args.capture_sensor)
+    return cfg
+
+
+def _cmd_design(args) -> int:
+    from pathlib import Path
+
+    from nlosplan.planner.design.run import run_design
+    from nlosplan.reports.design_report import minimum_hardware_text, write_design_report
+
+    cfg = build_config(args)
+    if args.real and not Path(args.real).exists():
+        raise UserError(f"capture store {args.real} does not exist")
+    with progress_bar(args, None, "design", "eval") as bar:
+        stage = {"last": None}
+
+        def progress(text, done, total):
+            if bar is None:  # no terminal: one line per stage on stderr (none with --json)
+                head = text.split(":")[0]
+                if not args.json and head != stage["last"]:
+                    stage["last"] = head
+                    print(f"nlosplan design: {head}", file=sys.stderr, flush=True)
+                return
+            if total is not None:
+                bar.total = total
+                bar.n = done
+            bar.set_postfix_str(text[:70])
+            bar.refresh()
+
+        result = run_design(cfg, args.out, resume=args.resume, workers=args.workers, cluster=args.cluster,
+                            progress=progress)
+    paths = write_design_report(result, args.out)
+    result["report"] = paths["html"]
+    result["report_markdown"] = paths["markdown"]
+    Path(args.out, "result.json").write_text(json.dumps(result, default=str, indent=1))
+    short = {"requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "minimum", "maximum",
+                                                 "interval", "feasible", "note") if k in r}
+                              for r in result["requirements"]],
+             "cheapest": result["cheapest"], "report": paths["html"],
+             "wall_seconds": result["provenance"]["wall_seconds"], "evaluations": result["evaluations"]}
+    text = (minimum_hardware_text(result, result["reference_bin_ps"])
+            + f"\n\n{result['evaluations']} evaluations in {result['provenance']['wall_seconds']:.0f} s; "
+              f"report: {paths['html']} (also report.md)")
+    emit(args, short, text)
+    return 0
+
+
+def add(sub) -> None:
+    """The ``design`` subcommand."""
+    p = sub_parser(sub, "design", "design",
+                   "the least hardware per NLOS task on the DENALI rig: search, verify, report (the main job)",
+                   description=DESCRIPTION)
+    p.add_argument("--quick", action="store_true",
+                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects): about 2 minutes")
+    p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
+                                                     "(see nlosplan/planner/design/config.py for the tables)")
+    p.add_argument("--requirement", action="append", type=_requirement, metavar="REQ",
+                   help="a requirement, repeatable, e.g. loc<=0.03, shape>=0.5, size>=0.9@lights=on "
+                        "(replaces the defaults)")
+    p.add_argument("--seeds", type=int_type(1, 20), default=None, help="seeds of the verification (default 3; quick 2)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from OUT/design_checkpoint.json; nothing evaluated is computed again")
+    runner = p.add_argument_group("where evaluations run")
+    runner.add_argument("--workers", type=int_type(1, 256), default=None,
+                        help="local worker processes (default: the CPU count)")
+    runner.add_argument("--cluster", metavar="ADDR",
+                        help="a Dask cluster: tcp://HOST:PORT (workers must see OUT) or local:N to start one here")
+    real = p.add_argument_group("real captures (optional)")
+    real.add_argument("--real", metavar="STORE", help="capture store (SQLite) whose captures the trained evaluator "
+                                                      "uses (import a DENALI folder with 'nlosplan dataset import-denali')")
+    real.add_argument("--where", metavar="COL=V,...", help="filter of the real captures, e.g. lights=off")
+    real.add_argument("--capture-sensor", metavar="NAME|FILE", help="preset or sensor file of the real captures "
+                                                                    "(default: the space's reference)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary (see above)")
+    p.set_defaults(func=_cmd_design)
+
+
+__all__ = ["add", "build_config"]

@@ -1,0 +1,119 @@
+"""Run configurations: the full default, ``--quick``, and TOML files.
+
+A TOML file may hold any of these tables (all optional; what is missing
+keeps the default of the chosen mode)::
+
+    [space]                      # DesignSpace fields
+    reference = "tmf8828-3x3-short"
+    zones = ["1x1", "3x3", "8x8"]
+    jitter_fwhm_ps = [0, 800]
+
+    [[requirements]]
+    task = "loc"
+    threshold = 0.05
+    condition = "size=4in"       # optional: size=, lights=, quadrant=
+
+    [cost]                       # CostModel weights per doubling
+    zones = 0.3
+
+    [search]                     # SearchConfig (fidelity as a table of tables)
+    seeds = 3
+
+    [scenes]                     # SceneSet: simulated scenes of the evaluators
+    positions_stride = 2
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+from nlosplan.errors import UserError
+from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.data import SceneSet
+from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
+from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
+from nlosplan.planner.design.run import DesignConfig
+from nlosplan.planner.design.search import SearchConfig
+from nlosplan.planner.design.space import DesignSpace
+
+__all__ = ["full_config", "quick_config", "load_config", "QUICK_OBJECTS"]
+
+#: Ten DENALI objects across the three class groups (the quick run's shape classes).
+QUICK_OBJECTS = ("A", "S", "O", "V", "3", "7", "circle", "plus", "triangle", "minus")
+
+
+def full_config() -> DesignConfig:
+    """The main job: all 30 objects, both sizes, 50 positions; the whole default space."""
+    from nlosplan.simulators.presets.denali import DENALI_OBJECTS
+
+    return DesignConfig(scenes=SceneSet(objects=DENALI_OBJECTS), label="full")
+
+
+def quick_config() -> DesignConfig:
+    """``--quick``: 10 objects, 50 positions, zones 1x1 and 3x3, four axes, coarse grids (CI, README)."""
+    fid = {k: dict(v) for k, v in DEFAULT_FIDELITY.items()}
+    fid["bound"]["draws"] = 200
+    fid["trained"]["epochs"] = 20
+    space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
+                        axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
+    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid)
+    scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
+                      crlb_stride=10)
+    return DesignConfig(space=space, search=search, scenes=scenes, label="quick")
+
+
+def _table(data: dict, name: str) -> dict:
+    t = data.get(name, {})
+    if not isinstance(t, dict):
+        raise UserError(f"[{name}] must be a table")
+    return t
+
+
+def load_config(path, base: DesignConfig) -> DesignConfig:
+    """``base`` with the tables of a TOML file applied (see the module notes)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise UserError(f"configuration file {p} does not exist") from None
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise UserError(f"cannot read {p}: {exc}") from None
+    bad = sorted(set(data) - {"space", "requirements", "cost", "search", "scenes"})
+    if bad:
+        raise UserError(f"{p}: unknown table(s) {', '.join(bad)}; allowed: space, requirements, cost, search, scenes")
+    cfg = base
+    if "space" in data:
+        cfg = replace(cfg, space=DesignSpace.from_dict({**base.space.to_dict(), **_table(data, "space")}))
+    if "requirements" in data:
+        reqs = data["requirements"]
+        if not isinstance(reqs, list) or not reqs:
+            raise UserError(f"{p}: [[requirements]] must be a non-empty array of tables")
+        try:
+            cfg = replace(cfg, requirements=tuple(Requirement.from_dict(r) for r in reqs))
+        except (KeyError, TypeError) as exc:
+            raise UserError(f"{p}: each requirement needs task and threshold ({exc})") from None
+    if "cost" in data:
+        cfg = replace(cfg, cost=CostModel.from_dict({**base.cost.to_dict(), **_table(data, "cost")}))
+    if "search" in data:
+        s = dict(_table(data, "search"))
+        fid = {k: {**v, **s.pop("fidelity", {}).get(k, {})} for k, v in base.search.fidelity.items()}
+        try:
+            cfg = replace(cfg, search=replace(base.search, fidelity=fid, **s))
+        except TypeError as exc:
+            raise UserError(f"{p}: [search]: {exc}") from None
+    if "scenes" in data:
+        s = dict(_table(data, "scenes"))
+        stride = s.pop("positions_stride", None)
+        if stride is not None:
+            s["positions"] = tuple(range(0, 100, int(stride)))
+        try:
+            cfg = replace(cfg, scenes=replace(base.scenes, **{k: tuple(v) if isinstance(v, list) else v
+                                                             for k, v in s.items()}))
+        except TypeError as exc:
+            raise UserError(f"{p}: [scenes]: {exc}") from None
+    return cfg
+
+
+__all__ += ["DEFAULT_REQUIREMENTS"]

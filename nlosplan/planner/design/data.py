@@ -1,0 +1,246 @@
+"""What the design evaluators read: reference histograms per zone layout, and their degradation to a design.
+
+Every design is *emulated* from a reference: the best sensor of the space for
+each zone layout (simulated once with the fast backend), or real captures (a
+capture store or DENALI folder), degraded by
+:mod:`nlosplan.sensor_models.degrade`. A design finer than the reference is
+unreachable and reported so, never extrapolated.
+
+The reference data is saved to one ``.npz`` file per layout so that worker
+processes (local pool or Dask) load it once and a resumed run does not
+simulate again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models import SensorConfig
+from nlosplan.sensor_models.degrade import Degradation, degrade_counts, degrade_expected, degrade_linear, reach
+
+__all__ = ["SceneSet", "ReferenceData", "simulate_reference", "reference_from_dataset", "load_reference"]
+
+LABEL_COLUMNS = ("object", "size", "class_group", "position", "x", "y", "lights")
+
+
+@dataclass(frozen=True)
+class SceneSet:
+    """Which simulated DENALI scenes the evaluators use.
+
+    Parameters
+    ----------
+    objects : tuple of str
+        DENALI objects (the shape task's classes).
+    sizes : tuple of str
+    positions : tuple of int
+        Gantry positions (0-99).
+    lights : str
+    repeats : int
+        Noisy captures per scene for the trained evaluator (averaged, as DENALI does).
+    crlb_objects : tuple of str
+        Objects of the localization bound's scenes (all sizes, every ``crlb_stride``-th position).
+    crlb_stride : int
+    fidelity : str
+        Fast-simulator level of the reference histograms.
+    """
+
+    objects: tuple[str, ...]
+    sizes: tuple[str, ...] = ("4in", "8in")
+    positions: tuple[int, ...] = tuple(range(0, 100, 2))
+    lights: str = "off"
+    repeats: int = 2
+    crlb_objects: tuple[str, ...] = ("A", "S", "circle")
+    crlb_stride: int = 5
+    fidelity: str = "low"
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
+
+    def key(self, sensor: SensorConfig) -> str:
+        text = json.dumps({"scenes": self.to_dict(), "sensor": sensor.to_dict()}, sort_keys=True, default=str)
+        return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceData:
+    """Reference histograms of one zone layout.
+
+    Parameters
+    ----------
+    sensor : SensorConfig
+        The reference sensor these histograms belong to.
+    labels : pandas.DataFrame
+        One row per scene (or capture): :data:`LABEL_COLUMNS`.
+    means : ndarray, shape (N, R, C, B) or None
+        Expected counts (simulated references).
+    counts : ndarray, shape (N, R, C, B) or None
+        Photon counts (real references; one row per capture).
+    crlb_lam : ndarray, shape (M, R, C, B) or None
+        Expected counts of the localization-bound scenes.
+    crlb_jac : ndarray, shape (M, R, C, B, P) or None
+        Their derivatives: x, y (per metre), then log photon scale.
+    crlb_labels : pandas.DataFrame or None
+        Labels of the M bound scenes.
+    source : str
+        ``"fast"`` or the path of the real captures.
+    seconds : float
+        Time to build it.
+    """
+
+    sensor: SensorConfig
+    labels: pd.DataFrame
+    means: np.ndarray | None = None
+    counts: np.ndarray | None = None
+    crlb_lam: np.ndarray | None = None
+    crlb_jac: np.ndarray | None = None
+    crlb_labels: pd.DataFrame | None = None
+    source: str = "fast"
+    seconds: float = 0.0
+
+    @property
+    def zones(self) -> tuple[int, int]:
+        return self.sensor.zones_rows, self.sensor.zones_cols
+
+    @property
+    def is_counts(self) -> bool:
+        return self.means is None
+
+    def degradation(self, design_sensor: SensorConfig) -> tuple[Degradation | None, str]:
+        """How to reach ``design_sensor`` from this reference (None and the reason if it cannot)."""
+        return reach(self.sensor, design_sensor, counts=self.is_counts)
+
+    def design_means(self, d: Degradation) -> np.ndarray:
+        """Expected counts of the design, (N, R', C', B')."""
+        if self.means is None:
+            raise UserError("real captures have no expected counts; the bounds use the simulated reference")
+        return degrade_expected(self.means, d)
+
+    def design_captures(self, d: Degradation, rng, repeats: int) -> np.ndarray:
+        """Noisy captures of the design, (N, repeats, R', C', B') int64 (real: one per capture row)."""
+        rng = np.random.default_rng(rng)
+        if self.means is not None:
+            lam = degrade_expected(self.means, d)
+            cap = rng.poisson(np.broadcast_to(lam[:, None], (lam.shape[0], repeats) + lam.shape[1:]))
+            return np.minimum(cap, self.sensor.max_count) if self.sensor.saturation else cap
+        return degrade_counts(self.counts, d, rng)[:, None]
+
+    def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:
+        """``(lam, jac)`` of the localization-bound scenes under the design."""
+        if self.crlb_lam is None:
+            raise UserError("this reference has no localization-bound scenes")
+        return degrade_expected(self.crlb_lam, d), degrade_linear(self.crlb_jac, d)
+
+    # --------------------------------------------------------------- files
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {k: getattr(self, k) for k in ("means", "counts", "crlb_lam", "crlb_jac") if getattr(self, k) is not None}
+        meta = {"sensor": self.sensor.to_dict(), "source": self.source, "seconds": self.seconds,
+                "labels": self.labels.to_dict(orient="list"),
+                "crlb_labels": None if self.crlb_labels is None else self.crlb_labels.to_dict(orient="list")}
+        tmp = path.with_name(path.name + ".part.npz")
+        np.savez(tmp, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
+        tmp.replace(path)
+        return path
+
+
+_CACHE: dict[str, ReferenceData] = {}
+
+
+def load_reference(path: str | Path) -> ReferenceData:
+    """A saved :class:`ReferenceData` (cached per process: workers load each file once)."""
+    key = str(Path(path).resolve())
+    if key not in _CACHE:
+        with np.load(key, allow_pickle=False) as z:
+            meta = json.loads(bytes(z["meta"]).decode())
+            arrays = {k: z[k] for k in ("means", "counts", "crlb_lam", "crlb_jac") if k in z}
+        crlb_labels = None if meta.get("crlb_labels") is None else pd.DataFrame(meta["crlb_labels"])
+        _CACHE[key] = ReferenceData(SensorConfig.from_dict(meta["sensor"]), pd.DataFrame(meta["labels"]),
+                                    crlb_labels=crlb_labels, source=meta["source"], seconds=meta["seconds"], **arrays)
+    return _CACHE[key]
+
+
+def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
+    from nlosplan.simulators.presets.denali import class_group, positions_xy
+
+    xy = positions_xy()
+    rows = [{"object": o, "size": s, "class_group": class_group(o), "position": p, "x": float(xy[p, 0]),
+             "y": float(xy[p, 1]), "lights": lights} for o in objects for s in sizes for p in positions]
+    return pd.DataFrame(rows, columns=list(LABEL_COLUMNS))
+
+
+def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None) -> ReferenceData:
+    """Simulate the reference histograms of one zone layout with the fast backend.
+
+    Parameters
+    ----------
+    sensor : SensorConfig
+        The reference sensor of the layout (finest timing, all bins, the most photons of the space).
+    scenes : SceneSet
+    progress : callable, optional
+        Called with a short text after each step.
+
+    Returns
+    -------
+    ReferenceData
+        ``means`` (N, R, C, B) for N = objects x sizes x positions and the
+        localization-bound scenes' ``crlb_lam``, ``crlb_jac``.
+    """
+    from nlosplan.simulators import FastSimulator, denali_scene
+    from nlosplan.tasks.bounds import counts_and_jacobian
+
+    t0 = time.perf_counter()
+    labels = _scene_labels(scenes.objects, scenes.sizes, scenes.positions, scenes.lights)
+    means = []
+    for obj in scenes.objects:  # one object at a time: bounded memory, a progress step each
+        batch = [denali_scene(obj, s, p, lights=scenes.lights) for s in scenes.sizes for p in scenes.positions]
+        means.append(np.asarray(FastSimulator(batch, sensor, fidelity=scenes.fidelity).expected(), np.float32))
+        if progress:
+            progress(f"{sensor.zones_rows}x{sensor.zones_cols} {obj}")
+    crlb_pos = scenes.positions[:: scenes.crlb_stride]
+    crlb_scenes = [denali_scene(o, s, p, lights=scenes.lights) for o in scenes.crlb_objects for s in scenes.sizes
+                   for p in crlb_pos]
+    lam, jac, _, _ = counts_and_jacobian(crlb_scenes, sensor, fidelity=scenes.fidelity)
+    r, c = sensor.zones_rows, sensor.zones_cols
+    lam = lam.reshape(len(crlb_scenes), r, c, -1)
+    jac = jac.reshape(len(crlb_scenes), r, c, lam.shape[-1], -1)
+    if progress:
+        progress(f"{r}x{c} bound scenes")
+    return ReferenceData(sensor, labels, means=np.concatenate(means), crlb_lam=lam, crlb_jac=jac,
+                         crlb_labels=_scene_labels(scenes.crlb_objects, scenes.sizes, crlb_pos, scenes.lights),
+                         source="fast", seconds=time.perf_counter() - t0)
+
+
+def reference_from_dataset(dataset, sensor: SensorConfig, source: str) -> ReferenceData:
+    """Real captures as a reference (counts; one row per capture, repeats kept).
+
+    Parameters
+    ----------
+    dataset : nlosplan.tasks.dataset.Dataset
+        Counts (N, R, C, B) with labels.
+    sensor : SensorConfig
+        The sensor that captured them (its zones and bins must match the histograms).
+    source : str
+        Where they come from (for the report).
+    """
+    h = np.asarray(dataset.histograms)
+    if h.shape[1:] != (sensor.zones_rows, sensor.zones_cols, sensor.n_bins):
+        raise UserError(f"captures are {h.shape[1]}x{h.shape[2]} zones x {h.shape[3]} bins but the capture sensor "
+                        f"{sensor.name} is {sensor.zones_rows}x{sensor.zones_cols} x {sensor.n_bins}; "
+                        "give the matching --capture-sensor")
+    if np.any(h < 0) or not np.allclose(h, np.round(h)):
+        raise UserError("real captures must be photon counts (non-negative integers)")
+    labels = dataset.labels.reset_index(drop=True)
+    missing = [c for c in LABEL_COLUMNS if c not in labels.columns]
+    if missing:
+        raise UserError(f"captures lack label column(s) {', '.join(missing)}")
+    return ReferenceData(sensor, labels[list(LABEL_COLUMNS)].copy(), counts=np.round(h).astype(np.int64),
+                         source=source)

@@ -1,0 +1,205 @@
+"""Evaluate one design on one task: fast bounds (screen) and trained models (verification).
+
+An evaluation is a plain dict in and a plain dict out (:func:`evaluate`), so
+it runs the same in this process, a local process pool or on Dask workers.
+Every result records the design, task, evaluator, fidelity, seed, metric
+value with its interval, run time and status (``ok``, ``unreachable`` with
+the reason, or ``failed`` with the error).
+
+Evaluators
+----------
+``bound``
+    Localization: the Cramér–Rao bound on (x, y) with the photon scale a
+    nuisance, RMS over the bound scenes (from the simulated reference's
+    Jacobian, degraded to the design; no interval: it is exact for those
+    scenes). Shape and size: the ideal observer's Monte-Carlo accuracy
+    (Poisson likelihood under every hypothesis, position and the other
+    label unknown), Wilson interval. A bound is optimistic: a design that
+    fails it fails every model.
+``trained``
+    DENALI's MLP trained on noisy captures of the design (repeats averaged),
+    random 70/30 split by scene, metric on the test scenes; interval by
+    bootstrap over the test scenes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+
+import numpy as np
+
+from nlosplan.planner.design.data import load_reference
+from nlosplan.planner.design.requirements import METRIC_OF_TASK
+from nlosplan.planner.design.space import Design
+
+__all__ = ["job_key", "evaluate", "DEFAULT_FIDELITY"]
+
+#: Knobs of each evaluator (the error-against-run-time axis of the report).
+DEFAULT_FIDELITY: dict[str, dict] = {
+    "bound": {"draws": 400, "crlb_repeats": 1},
+    "trained": {"model": "mlp", "epochs": 30, "width": 0.25, "repeats": 2, "bootstrap": 200},
+}
+
+
+def job_key(job: dict) -> str:
+    """A stable id of an evaluation (what resume looks up)."""
+    fields = {k: job[k] for k in ("evaluator", "task", "design", "seed", "fidelity", "condition", "reference")}
+    return hashlib.sha1(json.dumps(fields, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _rows(labels, condition) -> np.ndarray:
+    if not condition:
+        return np.ones(len(labels), bool)
+    col, val = condition.split("=", 1)
+    if col == "quadrant":
+        from nlosplan.tasks.metrics import position_quadrants
+
+        return position_quadrants(labels)["quadrant"].to_numpy() == val
+    return labels[col].astype(str).to_numpy() == val
+
+
+def _crlb(ref, deg, repeats: int, condition) -> tuple[float, str]:
+    from nlosplan.tasks.fisher import analyse_fisher, poisson_fisher
+
+    lam, jac = ref.design_crlb(deg)
+    keep = _rows(ref.crlb_labels, condition) if ref.crlb_labels is not None else np.ones(len(lam), bool)
+    lam, jac = lam[keep], jac[keep]
+    n, p = lam.shape[0], jac.shape[-1]
+    names = ("x", "y") + tuple(f"p{i}" for i in range(p - 2))
+    traces, bad = [], []
+    for i in range(n):
+        f = poisson_fisher(lam[i].reshape(-1), jac[i].reshape(-1, p), repeats)
+        res = analyse_fisher(f, names)
+        tr = float(np.trace(res["covariance"])) if res["position_identifiable"] else math.inf
+        traces.append(tr)
+        if not math.isfinite(tr):
+            bad.append(res["reason"] or "zero information")
+    value = math.sqrt(float(np.mean(traces))) if traces else math.nan
+    return value, (f"{len(bad)} of {n} scenes not identifiable: {bad[0]}" if bad else "")
+
+
+def _observer(ref, deg, task: str, draws: int, seed: int, condition) -> tuple[float, tuple[float, float]]:
+    from nlosplan.tasks.ideal_observer import observer_accuracy
+
+    means = ref.design_means(deg)
+    lab = ref.labels
+    keep = _rows(lab, condition)
+    objects = list(dict.fromkeys(lab["object"]))
+    sizes = list(dict.fromkeys(lab["size"]))
+    positions = list(dict.fromkeys(lab["position"]))
+    idx = {(o, s, p): i for i, (o, s, p) in enumerate(zip(lab["object"], lab["size"], lab["position"]))}
+    hyps = [(o, s) for o in objects for s in sizes
+            if any(keep[idx[(o, s, p)]] for p in positions if (o, s, p) in idx)]
+    cube = np.stack([np.stack([means[idx[(o, s, p)]].reshape(-1) for p in positions]) for o, s in hyps])
+    if task == "shape":
+        classes = sorted({o for o, _ in hyps})
+        class_of = [classes.index(o) for o, _ in hyps]
+    else:
+        classes = sorted({s for _, s in hyps})
+        class_of = [classes.index(s) for _, s in hyps]
+    if len(classes) < 2:
+        return math.nan, (math.nan, math.nan)
+    res = observer_accuracy(cube, np.asarray(class_of), draws=draws, seed=seed,
+                            max_count=ref.sensor.max_count if ref.sensor.saturation else None)
+    return float(res["accuracy"]), tuple(float(v) for v in res["ci"])
+
+
+def _bootstrap(values_fn, n: int, draws: int, seed: int) -> tuple[float, float]:
+    rng = np.random.default_rng(seed)
+    stats = [values_fn(rng.integers(0, n, n)) for _ in range(draws)]
+    return float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))
+
+
+def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[float, tuple[float, float], dict]:
+    import torch
+
+    from nlosplan.tasks.benchmark import train_config
+    from nlosplan.tasks.dataset import Dataset
+    from nlosplan.tasks.models import TASK_LABEL
+    from nlosplan.tasks.splits import make_split
+    from nlosplan.tasks.training import train_model
+
+    torch.set_num_threads(1)
+    caps = ref.design_captures(deg, np.random.default_rng([seed, 7]), int(fid["repeats"]))
+    hist = caps.mean(axis=1).astype(np.float32)  # repeats averaged, as DENALI does
+    labels = ref.labels.copy()
+    labels["zones"] = f"{hist.shape[1]}x{hist.shape[2]}"
+    labels["repeat"] = -1
+    labels["source"] = ref.source
+    ds = Dataset(hist, labels, deg.bin_width_ps)
+    sp = make_split(ds, "random", task, seed=seed)
+    train, test = ds.take(sp.train), ds.take(sp.test)
+    cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
+    if task == "loc":
+        y_train = train.labels[["x", "y"]].to_numpy(np.float64)
+    else:
+        y_train = train.labels[TASK_LABEL[task]].astype(str).to_numpy()
+    classes = None if task == "loc" else tuple(sorted(ds.labels[TASK_LABEL[task]].astype(str).unique()))
+    model = train_model(train.histograms, y_train, model=fid["model"], task=task, config=cfg,
+                        width=float(fid["width"]), classes=classes)
+    keep = _rows(test.labels, condition)
+    scores = model.predict(test.histograms)[keep]
+    if task == "loc":
+        err2 = ((scores - test.labels[["x", "y"]].to_numpy(np.float64)[keep]) ** 2).sum(axis=1)
+        stat = lambda i: math.sqrt(float(err2[i].mean()))  # noqa: E731 -- RMS of the 2-D error, as DENALI
+    else:
+        truth = np.array([classes.index(v) for v in test.labels[TASK_LABEL[task]].astype(str).to_numpy()[keep]])
+        hit = (np.argmax(scores, axis=1) == truth).astype(float)
+        stat = lambda i: float(hit[i].mean())  # noqa: E731
+    n = int(keep.sum())
+    if n == 0:
+        return math.nan, (math.nan, math.nan), {}
+    value = stat(np.arange(n))
+    lo, hi = _bootstrap(stat, n, int(fid["bootstrap"]), seed)
+    return value, (lo, hi), {"epochs": len(model.history), "n_train": int(model.n_train), "n_test": n,
+                             "train_seconds": float(model.train_seconds)}
+
+
+def evaluate(job: dict) -> dict:
+    """Run one evaluation.
+
+    Parameters
+    ----------
+    job : dict
+        ``evaluator`` (``"bound"``/``"trained"``), ``task``, ``design``
+        (:meth:`Design.to_dict`), ``seed``, ``fidelity`` (dict of knobs),
+        ``condition`` (``"col=value"`` or None), ``reference`` (path of the
+        saved :class:`~nlosplan.planner.design.data.ReferenceData` of the
+        design's zone layout), ``reference_sensor`` (the space's reference,
+        a dict).
+
+    Returns
+    -------
+    dict
+        The job's fields plus ``key``, ``metric``, ``value``, ``lo``, ``hi``,
+        ``seconds``, ``status`` and ``reason``, and ``extra`` details.
+    """
+    from nlosplan.sensor_models import SensorConfig
+
+    t0 = time.perf_counter()
+    out = {**job, "key": job_key(job), "metric": METRIC_OF_TASK[job["task"]][0], "value": math.nan,
+           "lo": math.nan, "hi": math.nan, "status": "ok", "reason": "", "extra": {}}
+    try:
+        design = Design.from_dict(job["design"])
+        ref = load_reference(job["reference"])
+        deg, why = ref.degradation(design.sensor(SensorConfig.from_dict(job["reference_sensor"])))
+        if deg is None:
+            out.update(status="unreachable", reason=why)
+        elif job["evaluator"] == "bound" and job["task"] == "loc":
+            value, note = _crlb(ref, deg, int(job["fidelity"].get("crlb_repeats", 1)), job["condition"])
+            out.update(value=value, lo=value, hi=value, reason=note)
+        elif job["evaluator"] == "bound":
+            value, (lo, hi) = _observer(ref, deg, job["task"], int(job["fidelity"]["draws"]), int(job["seed"]),
+                                        job["condition"])
+            out.update(value=value, lo=lo, hi=hi)
+        else:
+            value, (lo, hi), extra = _trained(ref, deg, job["task"], job["fidelity"], int(job["seed"]),
+                                              job["condition"])
+            out.update(value=value, lo=lo, hi=hi, extra=extra)
+    except Exception as exc:  # recorded, never fatal to the search
+        out.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
+    out["seconds"] = time.perf_counter() - t0
+    return out

@@ -1,0 +1,140 @@
+"""Where evaluations run: this process, a local process pool, or a Dask cluster.
+
+Every executor takes plain-dict jobs and a module-level function and yields
+``(job, result)`` as results arrive, so the search does not care where they
+ran. A job that raises is yielded with an ``{"status": "failed"}`` result;
+it never stops the others.
+
+``--cluster tcp://HOST:PORT`` connects to a running Dask scheduler (its
+workers must see the run's output folder, where the reference data lies);
+``--cluster local:N`` starts a Dask ``LocalCluster`` with N single-threaded
+worker processes on this machine.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Callable, Iterable, Iterator
+
+from nlosplan.errors import UserError
+
+__all__ = ["make_executor", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
+
+
+def _failed(job: dict, exc: BaseException) -> dict:
+    return {**job, "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
+
+
+class SerialExecutor:
+    """Run jobs one after another in this process."""
+
+    name = "serial"
+    workers = 1
+
+    def map(self, fn: Callable[[dict], dict], jobs: Iterable[dict]) -> Iterator[tuple[dict, dict]]:
+        for job in jobs:
+            try:
+                yield job, fn(job)
+            except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
+                yield job, _failed(job, exc)
+
+    def close(self) -> None:
+        pass
+
+
+def _init_worker() -> None:  # one thread per worker: the pool provides the parallelism
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover - torch is a dependency
+        pass
+
+
+class PoolExecutor:
+    """A local process pool (``spawn``: safe with JAX and torch in the parent)."""
+
+    name = "local pool"
+
+    def __init__(self, workers: int):
+        self.workers = int(workers)
+        self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=_init_worker)
+
+    def map(self, fn, jobs):
+        jobs = list(jobs)
+        futures = {self._pool.submit(fn, job): job for job in jobs}
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                job = futures[f]
+                exc = f.exception()
+                yield job, (_failed(job, exc) if exc else f.result())
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+class DaskExecutor:
+    """A Dask distributed cluster: an existing scheduler or a LocalCluster started here."""
+
+    def __init__(self, address: str):
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError as exc:  # pragma: no cover - dask is a dependency
+            raise UserError(f"--cluster needs dask[distributed]: {exc}") from None
+        self._cluster = None
+        if address.startswith("local:"):
+            try:
+                n = int(address.split(":", 1)[1])
+            except ValueError:
+                raise UserError(f"--cluster {address}: give local:N with N workers, e.g. local:2") from None
+            if n < 1:
+                raise UserError(f"--cluster {address}: N must be >= 1")
+            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                         dashboard_address=None, host="127.0.0.1")
+            self._client = Client(self._cluster)
+            self.workers = n
+            self.name = f"dask LocalCluster ({n} workers)"
+        elif address.startswith("tcp://"):
+            try:
+                self._client = Client(address, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise UserError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+            self.workers = max(1, len(self._client.scheduler_info().get("workers", {})))
+            self.name = f"dask {address} ({self.workers} workers)"
+        else:
+            raise UserError(f"--cluster {address!r}: give tcp://HOST:PORT or local:N")
+        self._client.run(_init_worker)
+
+    def map(self, fn, jobs):
+        from dask.distributed import as_completed
+
+        jobs = list(jobs)
+        futures = [self._client.submit(fn, job, pure=False) for job in jobs]
+        index = {f.key: job for f, job in zip(futures, jobs)}
+        for f in as_completed(futures):
+            job = index[f.key]
+            try:
+                yield job, f.result()
+            except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
+                yield job, _failed(job, exc)
+
+    def close(self) -> None:
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def make_executor(workers: int | None = None, cluster: str | None = None):
+    """The executor for ``--workers`` / ``--cluster`` (default: a pool of the CPU count, serial for 1)."""
+    if cluster:
+        return DaskExecutor(cluster)
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise UserError(f"--workers {n} must be >= 1")
+    return SerialExecutor() if n == 1 else PoolExecutor(n)

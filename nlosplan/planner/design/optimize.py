@@ -1,0 +1,142 @@
+"""Stage 4 of the search: the cheapest design per task and discrete choice, by nlopt on the corrected bound.
+
+For one requirement and one discrete choice (zones, bin width), COBYLA
+(derivative-free, handles the constraint) varies three normalized
+variables in [0, 1] — jitter (0: the space's smallest), log photon budget and
+number of bins — to minimize the design's cost subject to the requirement
+being met by the bound corrected with the measured bound-to-trained gap
+(:meth:`~nlosplan.planner.design.search.DesignSearch.predict`). The costliest
+corner is tried first: if even it misses, the choice is infeasible and
+nothing else is evaluated. Jobs are plain dicts (:func:`optimize_choice`),
+so the choices run in parallel on any executor.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.evaluators import evaluate
+from nlosplan.planner.design.requirements import Requirement
+from nlosplan.planner.design.search import _transform, _untransform
+from nlosplan.planner.design.space import Design, DesignSpace
+
+__all__ = ["optimize_jobs", "optimize_choice", "collect_candidates"]
+
+
+def optimize_jobs(search) -> list[dict]:
+    """One job per (requirement, zones, bin width) for :func:`optimize_choice`."""
+    jobs = []
+    for req in search.requirements:
+        gap = search.gap(req)["value"]
+        for z in search.space.zones:
+            for f in search.space.bin_factors:
+                base = search.base.replace(zones=z, bin_factor=f, n_bins=search.space.max_bins(f))
+                proto = search.job("bound", req, base)
+                jobs.append({"requirement": req.to_dict(), "gap": gap, "space": search.space.to_dict(),
+                             "space_reference": search.space.sensor.to_dict(), "cost": search.cost.to_dict(),
+                             "base": base.to_dict(), "max_evals": search.config.optimize_evals,
+                             "fidelity": {**proto["fidelity"], "draws": max(100, proto["fidelity"]["draws"] // 2)},
+                             "reference": proto["reference"], "reference_sensor": proto["reference_sensor"]})
+    return jobs
+
+
+def _design(u, base: Design, space: DesignSpace) -> Design:
+    u = np.clip(np.asarray(u, float), 0.0, 1.0)
+    jlo, jhi = space.jitter_fwhm_ps
+    plo, phi = space.photon_fraction
+    nlo, nhi = space.n_bins[0], space.max_bins(base.bin_factor)
+    return base.replace(jitter_fwhm_ps=round(jlo + (1 - u[0]) * (jhi - jlo), 3),
+                        photon_fraction=float(round(math.exp(math.log(plo) + u[1] * (math.log(phi) - math.log(plo))), 6)),
+                        n_bins=int(round(nlo + u[2] * (max(nhi, nlo) - nlo))))
+
+
+def optimize_choice(job: dict) -> dict:
+    """Cheapest design of one discrete choice meeting the corrected bound (see the module notes).
+
+    Returns
+    -------
+    dict
+        ``requirement`` (name), ``design`` (dict or None), ``cost``,
+        ``predicted`` (trained metric predicted there), ``bound``,
+        ``evaluations``, ``seconds``, ``status`` (``feasible``,
+        ``infeasible`` or ``failed``) and ``reason``.
+    """
+    import nlopt
+
+    from nlosplan.sensor_models import SensorConfig
+
+    t0 = time.perf_counter()
+    req = Requirement.from_dict(job["requirement"])
+    space = DesignSpace.from_dict(job["space"], sensor=SensorConfig.from_dict(job["space_reference"]))
+    cost_model = CostModel.from_dict(job["cost"])
+    base = Design.from_dict(job["base"])
+    memo: dict[Design, tuple[float, float]] = {}
+
+    def margin(u) -> tuple[float, float]:
+        d = _design(u, base, space)
+        if d not in memo:
+            r = evaluate({"evaluator": "bound", "task": req.task, "design": d.to_dict(), "seed": 0,
+                          "fidelity": job["fidelity"], "condition": None if req.condition is None else "=".join(req.condition),
+                          "reference": job["reference"], "reference_sensor": job["reference_sensor"]})
+            if r["status"] != "ok" or not math.isfinite(r["value"]):
+                memo[d] = (-1.0, math.nan)
+            else:
+                pred = _untransform(req, _transform(req, r["value"]) + job["gap"])
+                memo[d] = (req.margin(pred), r["value"])
+        return memo[d]
+
+    out = {"requirement": req.name, "design": None, "cost": math.nan, "predicted": math.nan, "bound": math.nan,
+           "status": "infeasible", "reason": "", "choice": f"{base.zones[0]}x{base.zones[1]}, bin x{base.bin_factor}"}
+    top = np.array([1.0, 1.0, 1.0])  # costliest corner: least jitter, most photons, most bins
+    m_top, _ = margin(top)
+    if not m_top >= 0:
+        out.update(reason="even the costliest setting of this choice misses the corrected bound",
+                   evaluations=len(memo), seconds=time.perf_counter() - t0)
+        return out
+    best = {"u": top, "cost": cost_model(_design(top, base, space), space)}
+
+    def objective(u, grad):
+        c = cost_model(_design(u, base, space), space)
+        if margin(u)[0] >= 0 and c < best["cost"]:
+            best.update(u=np.array(u), cost=c)
+        return c
+
+    opt = nlopt.opt(nlopt.LN_COBYLA, 3)
+    opt.set_lower_bounds([0.0] * 3)
+    opt.set_upper_bounds([1.0] * 3)
+    opt.set_min_objective(objective)
+    opt.add_inequality_constraint(lambda u, grad: -margin(u)[0], 0.0)
+    opt.set_maxeval(int(job["max_evals"]))
+    opt.set_initial_step(0.25)
+    try:
+        opt.optimize(top.copy())
+    except (nlopt.RoundoffLimited, ValueError, RuntimeError) as exc:  # keep the best feasible point found
+        out["reason"] = f"COBYLA stopped early ({type(exc).__name__})"
+    d = _design(best["u"], base, space)
+    m, b = margin(best["u"])
+    pred = _untransform(req, _transform(req, b) + job["gap"])
+    out.update(design=d.to_dict(), cost=best["cost"], predicted=pred, bound=b, status="feasible",
+               evaluations=len(memo), seconds=time.perf_counter() - t0)
+    return out
+
+
+def collect_candidates(search, results: list[dict], per_task: int) -> dict[str, list[dict]]:
+    """The ``per_task`` cheapest feasible, distinct designs per requirement."""
+    out = {}
+    for req in search.requirements:
+        rows = sorted((r for r in results if r["requirement"] == req.name and r["status"] == "feasible"),
+                      key=lambda r: r["cost"])
+        seen, picked = set(), []
+        for r in rows:
+            d = Design.from_dict(r["design"])
+            if d not in seen:
+                seen.add(d)
+                picked.append({**r, "design": d})
+            if len(picked) >= per_task:
+                break
+        out[req.name] = picked
+    return out

@@ -1,0 +1,113 @@
+"""What a task must achieve: one threshold on one metric, optionally under one condition.
+
+Defaults (DENALI-scale goals for a lab): localization RMSE <= 0.05 m, shape
+top-1 accuracy >= 0.35, size accuracy >= 0.90, over all test captures. A
+condition restricts the rows a metric is computed on, e.g. ``size=4in``,
+``lights=off`` or ``quadrant=far`` (the far quadrant of the gantry, see
+:func:`nlosplan.tasks.metrics.position_quadrants`).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from nlosplan.errors import UserError
+
+__all__ = ["Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "parse_requirement"]
+
+#: The metric each task is judged by, whether smaller is better, and its unit.
+METRIC_OF_TASK: dict[str, tuple[str, bool, str]] = {
+    "loc": ("rmse", True, "m"),
+    "shape": ("top1_acc", False, ""),
+    "size": ("top1_acc", False, ""),
+}
+_CONDITIONS = {"size": ("4in", "8in"), "lights": ("on", "off"), "quadrant": ("near", "far")}
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """``metric <= threshold`` (localization) or ``>= threshold`` (classification) for one task.
+
+    Parameters
+    ----------
+    task : {"loc", "shape", "size"}
+    threshold : float
+        Metres for localization RMSE, a fraction for accuracies.
+    condition : (str, str), optional
+        ``(column, value)`` among size / lights / quadrant.
+    """
+
+    task: str
+    threshold: float
+    condition: tuple[str, str] | None = None
+
+    def __post_init__(self) -> None:
+        if self.task not in METRIC_OF_TASK:
+            raise UserError(f"unknown task {self.task!r}; allowed: {', '.join(METRIC_OF_TASK)}")
+        t = float(self.threshold)
+        if not (t > 0) or (not self.smaller_is_better and t > 1):
+            raise UserError(f"{self.task} threshold {self.threshold} must be "
+                            f"{'> 0 (metres)' if self.smaller_is_better else 'in (0, 1]'}")
+        object.__setattr__(self, "threshold", t)
+        if self.condition is not None:
+            col, val = self.condition
+            if col not in _CONDITIONS or val not in _CONDITIONS[col]:
+                allowed = "; ".join(f"{k}={'|'.join(v)}" for k, v in _CONDITIONS.items())
+                raise UserError(f"unknown condition {col}={val}; allowed: {allowed}")
+            object.__setattr__(self, "condition", (str(col), str(val)))
+
+    @property
+    def metric(self) -> str:
+        return METRIC_OF_TASK[self.task][0]
+
+    @property
+    def smaller_is_better(self) -> bool:
+        return METRIC_OF_TASK[self.task][1]
+
+    @property
+    def name(self) -> str:
+        """E.g. ``loc rmse <= 0.05 m`` or ``shape top1_acc >= 0.35 [size=4in]``."""
+        op = "<=" if self.smaller_is_better else ">="
+        unit = METRIC_OF_TASK[self.task][2]
+        cond = f" [{self.condition[0]}={self.condition[1]}]" if self.condition else ""
+        return f"{self.task} {self.metric} {op} {self.threshold:g}{' ' + unit if unit else ''}{cond}"
+
+    def met(self, value: float) -> bool:
+        return value <= self.threshold if self.smaller_is_better else value >= self.threshold
+
+    def margin(self, value: float) -> float:
+        """Relative margin: > 0 met, < 0 missed (e.g. 0.2 = 20 % better than required)."""
+        if self.smaller_is_better:
+            return (self.threshold - value) / self.threshold
+        return (value - self.threshold) / self.threshold
+
+    def to_dict(self) -> dict:
+        return {"task": self.task, "threshold": self.threshold,
+                "condition": None if self.condition is None else "=".join(self.condition)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Requirement":
+        cond = data.get("condition")
+        if isinstance(cond, str):
+            cond = tuple(cond.split("=", 1)) if "=" in cond else None
+        return cls(data["task"], data["threshold"], cond)
+
+
+DEFAULT_REQUIREMENTS: tuple[Requirement, ...] = (
+    Requirement("loc", 0.05), Requirement("shape", 0.35), Requirement("size", 0.90))
+
+_PATTERN = re.compile(r"^\s*(loc|shape|size)\s*(?:<=|>=|=)\s*([0-9.eE+-]+)\s*(?:@\s*(\w+)=(\w+))?\s*$")
+
+
+def parse_requirement(text: str) -> Requirement:
+    """``"loc<=0.05"``, ``"shape>=0.35"``, ``"size>=0.9@size=4in"`` -> :class:`Requirement`."""
+    m = _PATTERN.match(text)
+    if not m:
+        raise UserError(f"requirement {text!r} must look like loc<=0.05, shape>=0.35 or size>=0.9@lights=on")
+    task, value, col, val = m.groups()
+    try:
+        threshold = float(value)
+    except ValueError:
+        raise UserError(f"requirement {text!r}: {value!r} is not a number") from None
+    return Requirement(task, threshold, (col, val) if col else None)

@@ -1,0 +1,253 @@
+"""``run_design``: references, the ask/tell search on an executor, a JSON checkpoint, the summary.
+
+The checkpoint (``OUT/design_checkpoint.json``) holds the configuration and
+every evaluation told so far (with its design, evaluator, fidelity, metric,
+interval, run time and status) and the optimize stage's candidates; it is
+rewritten atomically after every result. ``resume=True`` tells the search
+everything in it, so nothing already evaluated is computed again. The
+simulated references are saved beside it and reused when their
+configuration matches.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nlosplan.errors import UserError
+from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.data import SceneSet, reference_from_dataset, simulate_reference
+from nlosplan.planner.design.evaluators import evaluate
+from nlosplan.planner.design.executors import make_executor
+from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, optimize_jobs
+from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
+from nlosplan.planner.design.search import DesignSearch, SearchConfig
+from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.summary import summarize
+
+__all__ = ["DesignConfig", "run_design", "CHECKPOINT"]
+
+CHECKPOINT = "design_checkpoint.json"
+
+
+@dataclass(frozen=True)
+class DesignConfig:
+    """Everything a design run depends on (what the checkpoint must match to resume).
+
+    Parameters
+    ----------
+    space : DesignSpace
+    requirements : tuple of Requirement
+    cost : CostModel
+    search : SearchConfig
+    scenes : SceneSet
+        Simulated scenes of the evaluators.
+    real : str, optional
+        A capture store (SQLite) whose captures the trained evaluator uses
+        instead of simulated ones (degraded to each design).
+    real_where : dict, optional
+        Filter of the real captures (e.g. ``{"lights": "off"}``).
+    capture_sensor : str, optional
+        Preset or sensor file of the real captures (default: the space's reference).
+    label : str
+        ``"full"`` or ``"quick"`` (for the report).
+    """
+
+    space: DesignSpace = field(default_factory=DesignSpace)
+    requirements: tuple[Requirement, ...] = DEFAULT_REQUIREMENTS
+    cost: CostModel = field(default_factory=CostModel)
+    search: SearchConfig = field(default_factory=SearchConfig)
+    scenes: SceneSet | None = None
+    real: str | None = None
+    real_where: dict | None = None
+    capture_sensor: str | None = None
+    label: str = "full"
+
+    def to_dict(self) -> dict:
+        return {"space": self.space.to_dict(), "requirements": [r.to_dict() for r in self.requirements],
+                "cost": self.cost.to_dict(), "search": self.search.to_dict(),
+                "scenes": None if self.scenes is None else self.scenes.to_dict(), "real": self.real,
+                "real_where": self.real_where, "capture_sensor": self.capture_sensor, "label": self.label}
+
+    def hash(self) -> str:
+        return hashlib.sha1(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def _git_revision() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5,
+                             cwd=Path(__file__).resolve().parent)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
+    """What made a run: configuration, seeds, versions, revision, wall time, machine."""
+    import importlib.metadata as md
+
+    versions = {}
+    for pkg in ("nlosplan", "numpy", "jax", "torch", "nlopt", "pandas", "dask", "matplotlib"):
+        try:
+            versions[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            versions[pkg] = "not installed"
+    return {"config": cfg.to_dict(), "config_hash": cfg.hash(), "seeds": list(range(cfg.search.seeds)),
+            "versions": versions, "git_revision": _git_revision(), "wall_seconds": seconds,
+            "executor": executor_name, "python": platform.python_version(), "machine": platform.machine(),
+            "cpus": os.cpu_count()}
+
+
+class _Checkpoint:
+    def __init__(self, path: Path, cfg: DesignConfig, resume: bool):
+        self.path = path
+        self.data = {"config_hash": cfg.hash(), "config": cfg.to_dict(), "results": [], "candidates": None,
+                     "optimize_log": []}
+        if path.exists() and resume:
+            try:
+                old = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError) as exc:
+                raise UserError(f"cannot read the checkpoint {path}: {exc}") from None
+            if old.get("config_hash") != cfg.hash():
+                raise UserError(f"{path} is from a run with another configuration; use another --out, "
+                                "or run without --resume to start over (the old checkpoint is kept as .bak)")
+            self.data = old
+        elif path.exists():
+            path.replace(path.with_name(path.name + ".bak"))
+
+    def save(self) -> None:
+        tmp = self.path.with_name(self.path.name + ".part")
+        tmp.write_text(json.dumps(self.data, default=_json_default))
+        tmp.replace(self.path)
+
+
+def _json_default(o):
+    if isinstance(o, Design):
+        return o.to_dict()
+    if hasattr(o, "item"):
+        return o.item()
+    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+def _references(cfg: DesignConfig, out: Path, say) -> tuple[dict, dict, dict]:
+    """Simulated reference per zone layout (reused when saved with the same key); real ones if asked."""
+    from nlosplan.planner.design.data import load_reference
+
+    sims, real, info = {}, {}, {}
+    space, scenes = cfg.space, cfg.scenes
+    for z in space.zones:
+        ref_design = Design(z, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
+        sensor = ref_design.sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
+        path = out / "reference" / f"{z[0]}x{z[1]}_{scenes.key(sensor)}.npz"
+        if not path.exists():
+            say(f"simulating the {z[0]}x{z[1]} reference")
+            simulate_reference(sensor, scenes, progress=say).save(path)
+        ref = load_reference(path)
+        sims[f"{z[0]}x{z[1]}"] = path
+        info[f"{z[0]}x{z[1]}"] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
+                                   "seconds": ref.seconds, "source": "fast simulator", "fidelity": scenes.fidelity}
+    if cfg.real:
+        from nlosplan.experiments.jitter import load_study_dataset
+        from nlosplan.planner.design.space import _load_reference
+
+        captured = _load_reference(cfg.capture_sensor or space.reference)
+        ds = load_study_dataset(cfg.real, {**(cfg.real_where or {}),
+                                           "zones": f"{captured.zones_rows}x{captured.zones_cols}"})
+        ref = reference_from_dataset(ds, captured, str(cfg.real))
+        path = out / "reference" / f"real_{hashlib.sha1(str(cfg.real).encode()).hexdigest()[:8]}.npz"
+        ref.save(path)
+        for z in space.zones:
+            real[f"{z[0]}x{z[1]}"] = path  # unreachable layouts are reported per evaluation
+        info["real"] = {"captures": int(len(ds)), "source": str(cfg.real), "sensor": captured.name}
+    return sims, real, info
+
+
+def _stability(quick: bool) -> dict:
+    if quick:
+        return {"ran": False, "note": "not run with --quick; run `nlosplan check`"}
+    from nlosplan.stability import all_cases, run_cases
+
+    t0 = time.perf_counter()
+    results = run_cases(all_cases())
+    return {"ran": True, "passed": sum(r.passed for r in results), "total": len(results),
+            "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
+
+
+def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
+               cluster: str | None = None, progress=None) -> dict:
+    """Run the design search and summarize it.
+
+    Parameters
+    ----------
+    cfg : DesignConfig
+    out : str or Path
+        Output folder (checkpoint, references, report).
+    resume : bool
+        Continue from ``OUT/design_checkpoint.json`` (same configuration).
+    workers : int, optional
+        Local worker processes (default: the CPU count; 1 runs in this process).
+    cluster : str, optional
+        ``tcp://HOST:PORT`` or ``local:N`` (Dask) instead of the local pool.
+    progress : callable, optional
+        ``progress(text, done, total)`` after each step.
+
+    Returns
+    -------
+    dict
+        :func:`~nlosplan.planner.design.summary.summarize`'s result plus
+        ``provenance``, ``references``, ``stability`` and ``checkpoint``.
+    """
+    t0 = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
+    ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume)
+    sims, real, ref_info = _references(cfg, out, say)
+    search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
+    for r in ckpt.data["results"]:
+        search.tell(r)
+    if ckpt.data.get("candidates") is not None:
+        cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
+                 for k, v in ckpt.data["candidates"].items()}
+        search.stage = "optimize"
+    executor = make_executor(workers, cluster)
+    try:
+        done = len(ckpt.data["results"])
+        stability = None
+        while True:
+            jobs = search.ask()
+            if not jobs and search.stage == "optimize":
+                if ckpt.data.get("candidates") is None:
+                    say("optimizing per discrete choice (nlopt COBYLA on the corrected bound)")
+                    log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
+                    cands = collect_candidates(search, log, cfg.search.candidates)
+                    ckpt.data["candidates"] = cands
+                    ckpt.data["optimize_log"] = log
+                    ckpt.save()
+                search.set_candidates(cands, ckpt.data["optimize_log"])
+                continue
+            if not jobs:
+                break
+            total = done + len(jobs)
+            for _, result in executor.map(evaluate, jobs):
+                search.tell(result)
+                ckpt.data["results"].append(result)
+                ckpt.save()
+                done += 1
+                say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
+                    done, total)
+        stability = _stability(cfg.label == "quick")
+        executor_name = executor.name
+    finally:
+        executor.close()
+    result = summarize(search)
+    result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=ref_info,
+                  stability=stability, checkpoint=str(out / CHECKPOINT))
+    return result

@@ -1,0 +1,238 @@
+"""The design report: ``report.md``, a self-contained ``report.html`` and the PNG plots beside them.
+
+The first screen answers the question: for each task, the cheapest design
+that meets its requirement (with its metric, interval and margin), then the
+minimum requirement per parameter. Below: the trade-off curves, Pareto
+fronts, the evaluators' error against run time and the bound-to-trained gap,
+failures and unreachable designs, the stability catalog and provenance.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
+from nlosplan.reports.tables import format_table, markdown_table
+
+__all__ = ["write_design_report", "requirements_table", "answer_table", "minimum_hardware_text"]
+
+_PARAM_FMT = {
+    "zones": lambda v: {1: "1x1", 4: "2x2", 9: "3x3", 16: "4x4", 64: "8x8"}.get(round(v), f"{v:g} zones"),
+    "bin_factor": lambda v: f"{v:.0f} ps",
+    "n_bins": lambda v: f"{v:.0f}",
+    "jitter_fwhm_ps": lambda v: f"{v:.0f} ps",
+    "pulse_fwhm_ps": lambda v: f"{v:.0f} ps",
+    "photon_fraction": lambda v: f"{v:.3g}x",
+}
+
+
+def _fmt_metric(task: str, v) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    return f"{100 * v:.1f} cm" if task == "loc" else f"{100 * v:.1f} %"
+
+
+def _design_text(d: dict | None, ref_bin_ps: float) -> str:
+    if not d:
+        return "none in the space"
+    return (f"{d['zones']} zones, {d['n_bins']} bins of {d['bin_factor'] * ref_bin_ps:.0f} ps, jitter "
+            f"{d['jitter_fwhm_ps']:.0f} ps, pulse +{d['pulse_fwhm_ps']:.0f} ps, {d['photon_fraction']:.3g}x photons")
+
+
+def answer_table(summary: dict, ref_bin_ps: float) -> pd.DataFrame:
+    """One row per requirement: the cheapest design meeting it, its metric with interval, margin, cost, source."""
+    rows = []
+    for c in summary["cheapest"]:
+        task = c["task"]
+        ok = c["design"] is not None
+        rows.append({"requirement": c["requirement"], "met": "yes" if ok else "NO",
+                     "cheapest design": _design_text(c["design"], ref_bin_ps),
+                     "metric [95 % interval]": (f"{_fmt_metric(task, c['value'])} [{_fmt_metric(task, c['lo'])}, "
+                                                f"{_fmt_metric(task, c['hi'])}]") if ok else "n/a",
+                     "margin": f"{100 * c['margin']:+.0f} %" if ok else "n/a",
+                     "cost": f"{c['cost']:.2f}" if ok else "n/a", "from": c["source"]})
+    return pd.DataFrame(rows)
+
+
+def requirements_table(summary: dict) -> pd.DataFrame:
+    """One row per (requirement, parameter): least hardware along that axis, interval, note."""
+    rows = []
+    for r in summary["requirements"]:
+        kind = "minimum" if "minimum" in r else "maximum"
+        fmt = _PARAM_FMT[r["parameter"]]
+        v = r[kind]
+        rows.append({"requirement": r["requirement"], "parameter": r["label"],
+                     "least hardware": f"{kind[:3]} {fmt(v)}" if v is not None else "not met",
+                     "95 % interval": (f"{fmt(r['interval'][0])} - {fmt(r['interval'][1])}"
+                                       if r["interval"] else ""),
+                     "note": r["note"]})
+    return pd.DataFrame(rows)
+
+
+def minimum_hardware_text(summary: dict, ref_bin_ps: float) -> str:
+    """The terminal table: the answer per task, then the per-parameter requirements."""
+    a = answer_table(summary, ref_bin_ps)
+    r = requirements_table(summary)
+    return (format_table(a.to_dict("records")) + "\n\nminimum requirement per parameter (others at the reference "
+            f"{summary['reference_sensor']}):\n" + format_table(r.to_dict("records")))
+
+
+def _gap_rows(summary: dict) -> pd.DataFrame:
+    rows = []
+    for req, g in summary["gap"].items():
+        if req.startswith("loc"):
+            text = f"trained RMSE = {math.exp(g['value']):.1f}x the CRLB"
+        else:
+            text = f"logit(trained) = logit(ideal observer) {g['value']:+.2f}"
+        rows.append({"requirement": req, "gap (median)": text, "designs": g["n"],
+                     "spread (IQR)": f"{g['spread']:.2f}" if math.isfinite(g["spread"]) else "n/a"})
+    return pd.DataFrame(rows)
+
+
+def _evaluator_rows(summary: dict) -> pd.DataFrame:
+    rows = []
+    for e in summary["evaluators"]:
+        fid = ", ".join(f"{k}={v}" for k, v in e["fidelity"].items())
+        rows.append({"evaluator": e["evaluator"], "task": e["task"], "evaluations": e["evaluations"],
+                     "ok": e["ok"], "unreachable": e["unreachable"], "failed": e["failed"],
+                     "median s": f"{e['median_seconds']:.3f}", "total s": f"{e['total_seconds']:.1f}",
+                     "median 95 % half-interval": (f"{e['median_half_interval']:.4f}"
+                                                   if math.isfinite(e["median_half_interval"]) else "n/a"),
+                     "fidelity": fid})
+    return pd.DataFrame(rows)
+
+
+def _headline(summary: dict, ref_bin_ps: float) -> str:
+    parts = []
+    for c in summary["cheapest"]:
+        if c["design"]:
+            parts.append(f"**{c['requirement']}**: met by {_design_text(c['design'], ref_bin_ps)} "
+                         f"({_fmt_metric(c['task'], c['value'])}, cost {c['cost']:.2f})")
+        else:
+            parts.append(f"**{c['requirement']}**: no design in the space meets it with the trained models")
+    return "; ".join(parts) + "."
+
+
+def _slug(req: str) -> str:
+    return req.split()[0] + ("_" + req.split("[")[1].rstrip("]").replace("=", "_") if "[" in req else "")
+
+
+def write_design_report(result: dict, out) -> dict:
+    """Write ``report.md``, ``report.html`` and the PNGs into ``out``.
+
+    Parameters
+    ----------
+    result : dict
+        :func:`nlosplan.planner.design.run.run_design`'s result.
+    out : str or Path
+
+    Returns
+    -------
+    dict
+        ``markdown``, ``html`` and ``plots`` (name -> path).
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ref_bin = float(result["reference_bin_ps"])
+    plots = {}
+    for req in result["requirements_asked"]:
+        plots[f"trade-offs: {req}"] = plot_tradeoffs(result, req, out / f"tradeoffs_{_slug(req)}.png")
+    plots["Pareto fronts"] = plot_pareto(result, out / "pareto.png")
+    plots["evaluators: error against run time"] = plot_evaluators(result, out / "evaluators.png")
+    prov = result["provenance"]
+    answer, reqs = answer_table(result, ref_bin), requirements_table(result)
+    stab = result.get("stability") or {}
+    stab_text = (f"{stab['passed']} of {stab['total']} cases passed in {stab['seconds']:.0f} s"
+                 + (f"; FAILED: {', '.join(stab['failed'])}" if stab.get("failed") else "")
+                 if stab.get("ran") else stab.get("note", "not run"))
+    unreachable = result["unreachable"]
+    failures = result["failures"]
+    sections = [
+        ("Answer: the cheapest design per task", _headline(result, ref_bin), answer),
+        ("Minimum requirement per parameter",
+         f"Along each parameter from the reference ({result['reference_sensor']}, the others kept), the least "
+         "hardware whose trained model meets the requirement, interpolated between grid points; the interval comes "
+         "from the metric's 95 % interval. 'min' = at least, 'max' = at most.", reqs),
+        ("Bound-to-trained gap (multi-fidelity)",
+         "How far the trained models are from the fast bounds on the designs evaluated by both; the optimizer "
+         "screens with the bound corrected by this gap, and the cheapest candidates are verified by training.",
+         _gap_rows(result)),
+        ("Evaluators: error against run time", "Every evaluation records its run time and interval.",
+         _evaluator_rows(result)),
+    ]
+    md = [f"# nlosplan design — minimum hardware per NLOS task ({result['provenance']['config']['label']} run)", ""]
+    for title, text, df in sections:
+        md += [f"## {title}", "", text, "", markdown_table(df) if len(df) else "(none)", ""]
+    md += ["## Plots", ""] + [f"![{k}]({Path(v).name})" for k, v in plots.items()] + [""]
+    md += ["## Stability catalog (`nlosplan check`)", "", stab_text, ""]
+    md += ["## Failed evaluations", "", f"{len(failures)} failed" + (":" if failures else "."), ""]
+    md += [f"- {f['evaluator']} {f['task']} {f['design']}: {f['reason']}" for f in failures[:20]] + [""]
+    md += ["## Unreachable designs", "", f"{len(unreachable)}" + (":" if unreachable else "."), ""]
+    md += [f"- {u}" for u in unreachable[:20]] + [""]
+    md += ["## Provenance", "", f"- wall time: {prov['wall_seconds']:.1f} s on {prov['cpus']} CPUs ({prov['executor']})",
+           f"- git revision: {prov['git_revision']}; configuration hash {prov['config_hash']}; seeds {prov['seeds']}",
+           "- versions: " + ", ".join(f"{k} {v}" for k, v in prov["versions"].items()),
+           f"- references: {json.dumps(result['references'])}", "", "```json",
+           json.dumps(prov["config"], indent=1), "```", ""]
+    md_path = out / "report.md"
+    md_path.write_text("\n".join(md))
+    html_path = out / "report.html"
+    html_path.write_text(_html(result, sections, plots, stab_text, failures, unreachable, prov))
+    return {"markdown": str(md_path), "html": str(html_path), "plots": {k: str(v) for k, v in plots.items()}}
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1180px;margin:24px auto;padding:0 16px;color:#222}
+table{border-collapse:collapse;font-size:13px;margin:8px 0 18px}td,th{border:1px solid #ccc;padding:4px 8px;
+text-align:left;vertical-align:top}th{background:#f2f2f2}.no{color:#b00;font-weight:bold}.yes{color:#070;
+font-weight:bold}img{max-width:100%;border:1px solid #ddd;margin:6px 0}h1{font-size:22px}h2{font-size:18px;
+margin-top:28px}.lead{font-size:15px;background:#f7f7fb;padding:10px 14px;border-left:4px solid #446}
+pre{background:#f6f6f6;padding:8px;font-size:11px;overflow:auto}"""
+
+
+def _df_html(df: pd.DataFrame) -> str:
+    if not len(df):
+        return "<p>(none)</p>"
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in df.columns)
+    body = []
+    for row in df.itertuples(index=False):
+        cells = []
+        for v in row:
+            s = html.escape(str(v))
+            cls = ' class="no"' if s == "NO" else (' class="yes"' if s == "yes" else "")
+            cells.append(f"<td{cls}>{s}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+def _html(result, sections, plots, stab_text, failures, unreachable, prov) -> str:
+    parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>nlosplan design report</title>"
+             f"<style>{_CSS}</style></head><body>",
+             f"<h1>nlosplan design — minimum hardware per NLOS task ({html.escape(prov['config']['label'])} run)</h1>"]
+    for i, (title, text, df) in enumerate(sections):
+        parts.append(f"<h2>{html.escape(title)}</h2>")
+        lead = html.escape(text).replace("**", "")
+        parts.append(f"<p class='lead'>{lead}</p>" if i == 0 else f"<p>{lead}</p>")
+        parts.append(_df_html(df))
+    parts.append("<h2>Plots</h2>")
+    for name, path in plots.items():
+        data = base64.b64encode(Path(path).read_bytes()).decode()
+        parts.append(f"<h3>{html.escape(name)}</h3><img alt='{html.escape(name)}' src='data:image/png;base64,{data}'>")
+    parts.append(f"<h2>Stability catalog</h2><p>{html.escape(stab_text)}</p>")
+    parts.append(f"<h2>Failed evaluations</h2><p>{len(failures)} failed</p><ul>"
+                 + "".join(f"<li>{html.escape(f['evaluator'])} {html.escape(f['task'])} {html.escape(f['design'])}: "
+                           f"{html.escape(f['reason'])}</li>" for f in failures[:20]) + "</ul>")
+    parts.append(f"<h2>Unreachable designs</h2><p>{len(unreachable)}</p>")
+    parts.append("<h2>Provenance</h2><ul>"
+                 f"<li>wall time {prov['wall_seconds']:.1f} s on {prov['cpus']} CPUs ({html.escape(prov['executor'])})</li>"
+                 f"<li>git revision {html.escape(prov['git_revision'])}, configuration {prov['config_hash']}, "
+                 f"seeds {prov['seeds']}</li><li>versions: "
+                 + html.escape(", ".join(f"{k} {v}" for k, v in prov["versions"].items())) + "</li></ul>"
+                 f"<pre>{html.escape(json.dumps(prov['config'], indent=1))}</pre>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
