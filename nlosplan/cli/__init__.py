@@ -22,6 +22,7 @@ __all__ = ["EXIT_USAGE", "ROOMS", "build_parser", "main"]
 
 # The subcommand modules of ``nlosplan``, in the order of ``--help``; each has ``add(sub)``.
 ROOMS: tuple[str, ...] = (
+    "design",
     "sensor",
     "simulate",
     "check",

@@ -95,6 +95,12 @@ def emit(args, data, text: str) -> None:
 
 
 EXAMPLES = {
+    "design": (
+        "nlosplan design                                   # the main job: DENALI preset, ~15 min on 2 cores",
+        "nlosplan design --quick --json                    # reduced space, ~2 min",
+        "nlosplan design --requirement 'loc<=0.03' --requirement 'size>=0.95@size=4in' --out out/d --resume",
+        "nlosplan design --config my_space.toml --cluster local:4",
+    ),
     "sensor list": "nlosplan sensor list",
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
     "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
