@@ -161,7 +161,7 @@ def test_driver_start_transcript_and_frames():
     cfg = lidar.start("3x3", "short")
     assert cfg["sequence"] == "hdoEOzm" and cfg["answers"]["z"] == "Histogram is 1"
     ser.assert_consumed()
-    # the frame arrived with the 'm' answer (read as that answer), so the next one is read from the link
+    # the frame that followed the "m" answer stays buffered for read_frame; a second one follows on the link
     ser.pairs.append((b"s", b"Stop\r\n"))
     ser._out += stream
     frame = lidar.read_frame(timeout=1.0)

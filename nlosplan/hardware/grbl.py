@@ -65,6 +65,7 @@ class Grbl:
         self.limits_mm = ((float(x0), float(x1)), (float(y0), float(y1)))
         self.feed_mm_min = float(feed_mm_min)
         self.timeout, self.poll_s, self.move_timeout = timeout, poll_s, move_timeout
+        self.repoll_s = 0.5   # ask again for a status report not answered within this
         self.port_name = port if isinstance(port, str) else getattr(port, "port", None) or repr(port)
         self._ser, self._owned = open_serial(port, baudrate)
         self._reader = LineReader(self._ser)
@@ -98,7 +99,7 @@ class Grbl:
             try:
                 self.last_status = parse_status(s, self._wco)
             except ValueError:
-                return None  # a garbled report: the next poll brings another
+                return "bad status"
             if "WCO:" in s:
                 self._wco = tuple(float(v) for v in s.split("WCO:")[1].split("|")[0].rstrip(">").split(","))
             return "status"
@@ -262,9 +263,16 @@ class Grbl:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise DeviceTimeout(f"gantry on {self.port_name}: no status report within {timeout:g} s")
-            kind = self._handle(self._reader.readline(left), context)
+            try:
+                line = self._reader.readline(min(left, self.repoll_s))
+            except DeviceTimeout:
+                self._write(b"?")   # the report was lost or garbled beyond recognition: ask again
+                continue
+            kind = self._handle(line, context)
             if kind == "status":
                 return self.last_status
+            if kind == "bad status":
+                self._write(b"?")
 
     def wait_idle(self, timeout: float | None = None, context: str = "") -> Status:
         """Poll ``?`` until the state is Idle; returns that report.

@@ -67,6 +67,9 @@ class TMF8828:
     def command(self, char: str) -> list[str]:
         """Send a single-character command; returns its answer lines (until ``quiet_s`` of silence).
 
+        ``m`` (measure) returns at its first answer line: the firmware then
+        streams data without pause.
+
         Raises
         ------
         SensorError
@@ -76,7 +79,10 @@ class TMF8828:
             raise UserError(f"TMF8828 commands are single characters, not {char!r}")
         self._reader.write(char.encode("ascii"))
         try:
-            lines = self._reader.read_until_quiet(self.quiet_s, self.command_timeout)
+            if char == "m":
+                lines = [self._reader.readline(self.command_timeout)]
+            else:
+                lines = self._reader.read_until_quiet(self.quiet_s, self.command_timeout)
         except DeviceTimeout:
             raise SensorError(f"TMF8828 on {self.port_name}: no answer to command {char!r} within "
                               f"{self.command_timeout:g} s (wrong port or baud rate {self.baudrate}?)") from None
