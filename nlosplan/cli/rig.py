@@ -13,6 +13,7 @@ from nlosplan.errors import UserError
 
 # Further ``nlosplan rig NAME`` subcommands, one module of nlosplan.cli each, with ``add_rig(rsub)``.
 MORE_RIG_COMMANDS: tuple[str, ...] = (
+    "rig_run",
 )
 
 EXAMPLES = {

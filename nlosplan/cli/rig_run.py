@@ -1,0 +1,187 @@
+"""``nlosplan rig run``: the capture planner in closed loop with the rig (or its pty emulators)."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+from pathlib import Path
+
+from nlosplan.cli.common import emit, int_type, number_type
+from nlosplan.errors import UserError
+
+EXAMPLES = (
+    "nlosplan rig run --emulate --planner active --budget 40 --target-rmse 0.05 --store out/loop.db",
+    "nlosplan rig run --lidar /dev/ttyACM0 --gantry /dev/ttyUSB0 --planner doptimal --budget 30 --approve "
+    "--store runs.db --out out/loop",
+    "nlosplan rig run --emulate --planner raster --budget 10 --grid 10 --repeats 1 --store out/loop.db --json",
+)
+
+DESCRIPTION = """\
+Capture, ingest, update the model and the calibration, suggest the next
+batch, until the budget or the target is reached. Candidates: a GRID x GRID
+lattice over the gantry limits, screened by the keep-out rules (limits,
+object in the LiDAR's direct view); the planner's counts model is simulated
+at every candidate first (draft fidelity: about 25 s for 19 x 19 on 2 CPU
+cores). Planners: raster (DENALI's snake), random, active (ensemble-spread
+mutual information), doptimal (D-optimal calibration design, casadi/IPOPT),
+and -motion variants (information per second of gantry travel). Each batch
+is route-ordered (nearest neighbour + 2-opt) and run by the rig executor
+(every capture stored once; rerunning the same command resumes: stored
+captures are fed back and the deterministic planner repeats its choices).
+--target-rmse stops when the cross-validated localization RMSE of the
+ensemble over the captures reaches it. --approve shows each batch (table,
+and a PNG of the positions in --out) and waits for 'y' before anything
+moves; any other answer ends the run. The planner's JSON checkpoint and the
+progress are written to --out."""
+
+
+def _run_id(args) -> str:
+    if args.run:
+        return args.run
+    blob = json.dumps({k: getattr(args, k) for k in ("planner", "budget", "batch", "grid", "seed", "object", "size",
+                                                     "zones", "range_mode", "repeats", "emulate")}, sort_keys=True)
+    return f"plan-{args.planner}-{args.object}-{args.size}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
+
+
+def _approver(args, out: Path):
+    from nlosplan.reports.capture_plan_plot import batch_table, plot_batch
+
+    def approve(batch, planner) -> bool:
+        k = sum(1 for f in out.glob("batch_*.png"))
+        png = plot_batch(batch, planner.space.points_mm, planner.space.points_mm[planner.captured],
+                         planner.position_mm, out / f"batch_{k:03d}.png",
+                         title=f"{planner.config.strategy}: batch of {len(batch)}")
+        print(f"proposed batch ({len(planner.observations)} captured so far); plot: {png}\n{batch_table(batch)}",
+              file=sys.stderr, flush=True)
+        print(f"move the gantry to these {len(batch)} positions? [y/N] ", end="", file=sys.stderr, flush=True)
+        answer = sys.stdin.readline().strip().lower()
+        return answer in ("y", "yes")
+
+    return approve
+
+
+def _cmd(args) -> int:
+    from nlosplan.cli.rig import _open
+    from nlosplan.hardware.executor import Executor, RunContext
+    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
+    from nlosplan.hardware.plans import ask_tell_plan
+    from nlosplan.hardware.rig import sensor_preset
+    from nlosplan.hardware.tmf8828 import SensorError
+    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
+    from nlosplan.planner.capture import (CapturePlanner, MotionModel, PlannerConfig, build_space, denali_scene_fn,
+                                          grid_points, screen_candidates)
+    from nlosplan.planner.capture.closed_loop import ClosedLoop
+    from nlosplan.tasks.store import CaptureStore
+
+    if not args.emulate and not (args.lidar and args.gantry):
+        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
+    if args.lights == "on":
+        raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    sensor = sensor_preset(args.zones, args.range_mode)
+    scene_fn = denali_scene_fn(args.object, args.size, "off")
+    (x0, x1), (y0, y1) = args.limits
+    cand = screen_candidates(grid_points(args.grid, args.grid, (x0, x1), (y0, y1)), limits=args.limits,
+                             scene_fn=scene_fn, sensor=sensor)
+    if not args.quiet and not args.json:
+        print(f"[rig run] simulating the counts model at {len(cand.points_mm)} candidates "
+              f"({len(cand.excluded)} excluded) ...", file=sys.stderr, flush=True)
+    space = build_space(cand.points_mm, sensor, scene_fn=scene_fn, repeats=args.repeats, excluded=cand.excluded)
+    motion = MotionModel(feed_mm_s=args.feed / 60.0, settle_s=args.settle)
+    planner = CapturePlanner(space, PlannerConfig(strategy=args.planner, batch_size=args.batch, budget=args.budget,
+                                                  seed=args.seed, motion=motion, start_mm=(x0, y0)))
+
+    def report(row):
+        if not args.quiet and not args.json:
+            cv = row["cv_rmse_m"]
+            print(f"[rig run] {row['captures']} captured, {row['failed']} failed, cross-validated RMSE "
+                  f"{'n/a (too few)' if cv == float('inf') else f'{1e3 * cv:.1f} mm'}, calibration "
+                  f"{[round(v, 4) for v in row['calibration_theta']]}", file=sys.stderr, flush=True)
+
+    loop = ClosedLoop(planner, target_rmse_m=args.target_rmse, checkpoint=out / "planner.json",
+                      approve=_approver(args, out) if args.approve else None, on_batch=report)
+    run_id = _run_id(args)
+    ctx = RunContext(args.object, args.size, lights=False, source="emulated:rig" if args.emulate else "rig",
+                     plan=f"planner {args.planner}, budget {args.budget}, batches of {args.batch}",
+                     plan_spec={"kind": "planner", "planner": args.planner, "budget": args.budget,
+                                "batch": args.batch, "grid": args.grid, "seed": args.seed})
+    plan = ask_tell_plan(loop.suggest, loop.tell, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
+                         max_positions=args.budget)
+    args.emulate_faults, args.no_park = None, False  # what the shared rig opener reads
+    with CaptureStore(args.store) as store, _open(args) as rig:
+        ex = Executor(rig, store, run_id=run_id, context=ctx)
+        try:
+            summary = ex.run(plan)
+        except (GrblAlarm, GrblError, SensorError, ConnectionLost, DeviceTimeout) as exc:
+            s = ex.summary
+            raise UserError(f"run {run_id} stopped at step {max(s.steps - 1, 0)}: {exc}; {s.captured} new captures "
+                            "stored; fix it and rerun the same command to resume") from None
+    best = planner.best()
+    result = {"run_id": run_id, "store": str(args.store), "planner": best, "history": loop.history,
+              "executor": summary.to_dict(), "checkpoint": str(out / "planner.json"),
+              "excluded": cand.excluded,
+              "finished": planner.finished or (f"budget of {args.budget} positions spent"
+                                               if best["captures"] >= args.budget else "plan ended")}
+    (out / "rig_run.json").write_text(json.dumps(result, indent=1, default=float), encoding="utf-8")
+    last = loop.history[-1] if loop.history else None
+    cv = "n/a" if not last or last["cv_rmse_m"] == float("inf") else f"{1e3 * last['cv_rmse_m']:.1f} mm"
+    text = (f"run {run_id}: {best['captures']} positions captured ({summary.captured} captures stored, "
+            f"{summary.resumed} found stored), {best['failed']} failed, in {summary.seconds:.1f} s -> {args.store}\n"
+            f"stopped: {result['finished']}; cross-validated localization RMSE {cv}\n"
+            f"calibration (dx m, dy m, log photon scale, log albedo): "
+            f"{[round(v, 5) for v in best['calibration']['theta']]} +- "
+            f"{[round(v, 5) for v in best['calibration']['std']]}\nwrote {out / 'rig_run.json'}, "
+            f"{out / 'planner.json'}")
+    emit(args, result, text)
+    return 0
+
+
+def add_rig(rsub) -> None:
+    """Register ``nlosplan rig run``."""
+    from nlosplan.cli.rig import _limits
+    from nlosplan.planner.capture import STRATEGIES
+
+    p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",
+                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
+                        epilog="examples:\n" + "\n".join(f"  {e}" for e in EXAMPLES))
+    p.add_argument("--planner", default="active", choices=STRATEGIES, help="strategy (default: active)")
+    p.add_argument("--budget", type=int_type(1, 10_000), default=40, metavar="N",
+                   help="most positions to capture (default: 40)")
+    p.add_argument("--target-rmse", type=number_type(float), default=None, metavar="M",
+                   help="stop when the cross-validated localization RMSE (m) reaches this, e.g. 0.05")
+    p.add_argument("--batch", type=int_type(1, 100), default=5, metavar="N", help="positions per batch (default: 5)")
+    p.add_argument("--grid", type=int_type(2, 41), default=19, metavar="N",
+                   help="candidate lattice N x N over the limits (default: 19)")
+    p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves")
+    p.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port")
+    p.add_argument("--gantry", metavar="PORT", help="GRBL serial port")
+    p.add_argument("--emulate", action="store_true", help="pty emulators of both devices (same driver code)")
+    p.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
+    p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
+    p.add_argument("--out", default="nlosplan-out/rig-run", metavar="DIR",
+                   help="planner checkpoint, batch plots, rig_run.json (default: %(default)s)")
+    p.add_argument("--repeats", type=int_type(1, 100), default=3, help="captures per position (default: 3)")
+    p.add_argument("--settle", type=number_type(float, zero_ok=True), default=0.5, metavar="S",
+                   help="seconds after each move (default: 0.5)")
+    p.add_argument("--limits", type=_limits, default=((0.0, 320.0), (0.0, 320.0)), metavar="X0:X1,Y0:Y1",
+                   help="gantry limits in mm (default: 0:320,0:320)")
+    p.add_argument("--feed", type=number_type(float), default=3000.0, help="feed rate, mm/min (default: 3000)")
+    p.add_argument("--object", default="A", help="DENALI object (default: A)")
+    p.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: 8in)")
+    p.add_argument("--zones", default="3x3", choices=["3x3", "4x4", "8x8"], help="TMF8828 zones (default: 3x3)")
+    p.add_argument("--range", dest="range_mode", default="short", choices=["short", "long"],
+                   help="ranging mode (default: short)")
+    p.add_argument("--lights", default="off", choices=["off", "on"], help="room lights (off only, for now)")
+    p.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
+                   help="TMF8828 firmware baud rate (default: 2000000)")
+    p.add_argument("--home", action="store_true", help="home the gantry ($H) first")
+    p.add_argument("--unlock", action="store_true", help="clear a gantry alarm with $X")
+    p.add_argument("--seed", type=int, default=0, help="planner seed (and --emulate noise seed) (default: 0)")
+    p.add_argument("--time-scale", type=number_type(float), default=20.0,
+                   help="--emulate: emulated motion runs this much faster (default: 20)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=_cmd)
