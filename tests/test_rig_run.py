@@ -6,7 +6,6 @@ import json
 import pytest
 
 from nlosplan.cli import main
-from nlosplan.planner.capture import CapturePlanner
 
 ARGS = ["rig", "run", "--emulate", "--planner", "active", "--budget", "4", "--batch", "2", "--grid", "3",
         "--repeats", "1", "--settle", "0", "--quiet"]
@@ -49,4 +48,3 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "give --lidar PORT and --gantry PORT, or --emulate" in err
     assert main(["rig", "run", "--emulate", "--planner", "best", "--store", str(tmp_path / "x.db")]) == 2
     assert "invalid choice: 'best'" in capsys.readouterr().err
-    assert CapturePlanner  # the planner the command drives

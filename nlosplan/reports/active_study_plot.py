@@ -41,7 +41,8 @@ def _header(result: dict) -> str:
     ratio = result.get("ratio_best_to_raster")
     head = (f"active vs raster: {cfg['obj']} {cfg['size']}, {cfg['sensor']}, {result['candidates']} candidates "
             f"({cfg['grid']}x{cfg['grid']}), batches of {cfg['batch_size']}, budget {cfg['budget']}, seeds "
-            f"{','.join(str(s) for s in cfg['seeds'])}; targets: localization RMSE <= {1e3 * cfg['target_rmse_m']:g} mm "
+            f"{','.join(str(s) for s in cfg['seeds'])}; targets: localization RMSE <= "
+            f"{1e3 * cfg['target_rmse_m']:g} mm "
             f"on {cfg['test_points']} test positions, calibration error <= {cfg['target_calibration']:g} tolerance")
     if ratio is not None:
         head += f"\nbest strategy / raster, captures to the localization target (medians): {ratio:.2f}"
