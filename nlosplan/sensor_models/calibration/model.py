@@ -1,0 +1,150 @@
+"""Calibration parameters, their normalization, and the forward model of a capture.
+
+The forward model is the sensor pipeline of
+:func:`~nlosplan.sensor_models.pipeline.expected_counts` applied to the
+arrivals of each capture's matching simulated scene (``times_ps``,
+``weights``, per capture and zone, computed once by the caller):
+
+    mu_j = N * [ s * sum_k w_k IRF_j(t_k) + x * IRF_j(0) ] + b
+
+with ``N`` iterations, ``s`` the photon scale, ``x`` the crosstalk peak at
+zero optical path, ``b`` the noise floor (ambient + dark counts per bin) and
+``IRF`` the impulse response (the non-parametric pulse shape, if any,
+convolved with a Gaussian of ``pulse_fwhm_ps``) on bins of
+``bin_width_ps`` starting at ``start_offset_ps``.
+
+Every optimizer works on normalized variables ``z in [0, 1]``: linear or
+logarithmic maps of each parameter's bounds, so ps, counts and photons per
+iteration are equally scaled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nlosplan._jax import jax, jnp
+from nlosplan.constants import FWHM_PER_SIGMA
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.pipeline import bin_arrivals
+
+
+@dataclass(frozen=True)
+class Param:
+    """One fitted parameter: name, unit, bounds and scale of its normalization."""
+
+    name: str
+    unit: str
+    lo: float
+    hi: float
+    log: bool = False
+
+    def to_unit(self, value: float) -> float:
+        """Physical value -> normalized ``[0, 1]``."""
+        if self.log:
+            return (math.log(value) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo))
+        return (value - self.lo) / (self.hi - self.lo)
+
+    def from_unit(self, z):
+        """Normalized -> physical (works on arrays)."""
+        if self.log:
+            return np.exp(np.log(self.lo) + z * (np.log(self.hi) - np.log(self.lo)))
+        return self.lo + z * (self.hi - self.lo)
+
+    def check(self, value: float) -> None:
+        """Raise :class:`UserError` when ``value`` is outside the bounds."""
+        if not (math.isfinite(value) and self.lo <= value <= self.hi):
+            raise UserError(f"start value {self.name}={value:g} {self.unit} is outside its bounds "
+                            f"[{self.lo:g}, {self.hi:g}]; give a start inside them")
+
+
+#: Parameters in model order.
+PARAMS: tuple[Param, ...] = (
+    Param("photon_scale", "photons/iteration per unit weight", 1e-4, 1e4, log=True),
+    Param("pulse_fwhm_ps", "ps", 1.0, 2000.0, log=True),
+    Param("bin_width_ps", "ps", 50.0, 200.0),
+    Param("start_offset_ps", "ps", -3000.0, 1000.0),
+    Param("noise_per_bin", "counts/bin", 1e-3, 1e6, log=True),
+    Param("crosstalk", "photons/iteration", 1e-7, 10.0, log=True),
+)
+PARAM_NAMES = tuple(p.name for p in PARAMS)
+
+#: DENALI's three calibration functions and the parameters each fits (they stack in the order given).
+STEPS: dict[str, tuple[str, ...]] = {
+    "scale": ("photon_scale",),
+    "pulse": ("pulse_fwhm_ps", "bin_width_ps", "start_offset_ps"),
+    "noise": ("noise_per_bin", "crosstalk"),
+}
+
+
+@dataclass(frozen=True)
+class CaptureSet:
+    """Real histograms with the arrivals of their matching simulated scenes.
+
+    Attributes
+    ----------
+    counts : ndarray, shape (N, Z, B)
+        Measured counts of N captures, Z zones each.
+    times_ps, weights : ndarray, shape (N, Z, K)
+        Arrival times (ps) and transport weights of each capture's simulated scene.
+    iterations : int
+        Laser iterations per histogram.
+    labels : tuple of str
+        One label per capture (e.g. ``"0.150 m"``), for messages and reports.
+    """
+
+    counts: np.ndarray
+    times_ps: np.ndarray
+    weights: np.ndarray
+    iterations: int
+    labels: tuple
+
+    def subset(self, idx) -> "CaptureSet":
+        """The captures at ``idx``."""
+        idx = np.asarray(idx, dtype=int)
+        return CaptureSet(self.counts[idx], self.times_ps[idx], self.weights[idx], self.iterations,
+                          tuple(self.labels[i] for i in idx))
+
+
+def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0):
+    """A jitted ``f(theta (6,)) -> mu (N, Z, B)`` of physical parameters in :data:`PARAMS` order.
+
+    Parameters
+    ----------
+    captures : CaptureSet
+    pulse_shape : sequence of float, optional
+        Non-parametric pulse (sums to 1), sample ``i`` over
+        ``[t0 + i step, t0 + (i + 1) step)`` relative to the nominal arrival;
+        the Gaussian of ``pulse_fwhm_ps`` broadens it. None: Gaussian only.
+    """
+    t = jnp.asarray(captures.times_ps, jnp.float64)
+    w = jnp.asarray(captures.weights, jnp.float64)
+    n_bins = captures.counts.shape[-1]
+    iters = float(captures.iterations)
+    pulse = None
+    if pulse_shape is not None:
+        p = np.asarray(pulse_shape, dtype=np.float64)
+        pulse = (jnp.asarray(pulse_t0_ps + pulse_step_ps * np.arange(p.size)), float(pulse_step_ps), jnp.asarray(p))
+
+    def model(theta):
+        scale, fwhm, bw, t0, noise, xt = (theta[i] for i in range(6))
+        edges = t0 + bw * jnp.arange(n_bins + 1, dtype=jnp.float64)
+        sigma = fwhm / FWHM_PER_SIGMA
+        sig = bin_arrivals(t, scale * w, edges, sigma, pulse)
+        zero = jnp.zeros(t.shape[:-1] + (1,))
+        cross = bin_arrivals(zero, jnp.full(zero.shape, 1.0) * xt, edges, sigma, pulse)
+        return iters * (sig + cross) + noise
+
+    return jax.jit(model)
+
+
+def poisson_deviance(mu, counts, mask=None) -> float:
+    """Mean Poisson deviance per bin ``2 [mu - n + n log(n / mu)]`` over the masked bins."""
+    mu = np.maximum(np.asarray(mu, dtype=np.float64), 1e-12)
+    n = np.asarray(counts, dtype=np.float64)
+    d = 2.0 * (mu - n + np.where(n > 0, n * np.log(np.where(n > 0, n, 1.0) / mu), 0.0))
+    if mask is not None:
+        d = d[mask]
+    return float(np.mean(d))
