@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from nlosplan.cli import main
 from nlosplan.hardware.bench import BITS_PER_BYTE, bench_rig, frame_text
 from nlosplan.hardware.tmf8828_protocol import FrameAssembler, ZoneMode
@@ -14,11 +16,11 @@ def test_bench_rig_figures_are_consistent():
     for f in (f3, f8):
         assert 0 < f["parse_ms_median"] and 0 < f["store_ms_median"]
         assert f["total_ms_median"] <= f["total_ms_p95"]
-        assert f["line_time_ms"] == f["bytes_per_frame"] * BITS_PER_BYTE / 2_000_000 * 1e3
+        assert f["line_time_ms"] == pytest.approx(f["bytes_per_frame"] * BITS_PER_BYTE / 2_000_000 * 1e3)
     # an 8x8 frame is 8 dumps + 4 results: about 8x the bytes of a 3x3 frame
     assert 7 < f8["bytes_per_frame"] / f3["bytes_per_frame"] < 9
     for p in res["parser"]:
-        assert p["dropped_frames"] == 0 and p["times_line_rate"] == p["bytes_per_second"] / 200_000
+        assert p["dropped_frames"] == 0 and p["times_line_rate"] == pytest.approx(p["bytes_per_second"] / 200_000)
     assert res["targets"]["met_3x3"] == (f3["total_ms_median"] <= 5.0)
 
 
