@@ -31,6 +31,7 @@ ROOMS: tuple[str, ...] = (
     "benchmark",
     "study",
     "evaluate",
+    "calibrate",
     "rig",
 )
 

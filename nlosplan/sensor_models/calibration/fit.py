@@ -271,7 +271,8 @@ def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), 
             raise UserError(f"unknown calibration parameter {name!r}; allowed: {', '.join(PARAM_NAMES)}")
         PARAMS[PARAM_NAMES.index(name)].check(float(v))
         values[name] = float(v)
-    model = make_model(captures, pulse_shape, pulse_step_ps, pulse_t0_ps)
+    model = make_model(captures, pulse_shape, pulse_step_ps, pulse_t0_ps, values["bin_width_ps"],
+                       values["start_offset_ps"])
     floor = np.median(captures.counts[..., -FLOOR_BINS:], axis=-1)[..., None] if noise == "measured" else None
     mask = np.broadcast_to(used[..., None], captures.counts.shape)
     dev = _deviance_fn(model, captures.counts, mask, floor)
@@ -320,7 +321,8 @@ def _check_peaks(model, theta, captures, used, floor) -> None:
 
 def predict(fit: CalibrationFit, captures: CaptureSet, noise: str = "global") -> np.ndarray:
     """Expected counts of ``captures`` under the fitted parameters, shape (N, Z, B)."""
-    model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps)
+    model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps, fit.values["bin_width_ps"],
+                       fit.values["start_offset_ps"])
     mu = np.asarray(model(jnp.asarray(fit.theta())), dtype=np.float64)
     if noise == "measured":
         floor = np.median(captures.counts[..., -FLOOR_BINS:], axis=-1)[..., None]

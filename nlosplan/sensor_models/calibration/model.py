@@ -28,7 +28,9 @@ import numpy as np
 from nlosplan._jax import jax, jnp
 from nlosplan.constants import FWHM_PER_SIGMA
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.pipeline import bin_arrivals
+from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.pipeline import pulse_boxes
+from nlosplan.sensor_models.transient import TimeGrid, deposit, irf_extent_ps, irf_matrix
 
 
 @dataclass(frozen=True)
@@ -108,8 +110,14 @@ class CaptureSet:
                           tuple(self.labels[i] for i in idx))
 
 
-def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0):
+def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0,
+               nominal_bin_width_ps: float = 92.0, nominal_offset_ps: float = -1100.0, oversample: int = 8):
     """A jitted ``f(theta (6,)) -> mu (N, Z, B)`` of physical parameters in :data:`PARAMS` order.
+
+    Arrivals are deposited on a node grid of ``oversample`` nodes per bin and
+    binned through the impulse response by one node-to-bin matrix
+    (:mod:`~nlosplan.sensor_models.transient`, as the fast simulator): exact in
+    mass and mean time, traceable in the bin width, offset and pulse width.
 
     Parameters
     ----------
@@ -118,26 +126,42 @@ def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 10
         Non-parametric pulse (sums to 1), sample ``i`` over
         ``[t0 + i step, t0 + (i + 1) step)`` relative to the nominal arrival;
         the Gaussian of ``pulse_fwhm_ps`` broadens it. None: Gaussian only.
+    nominal_bin_width_ps, nominal_offset_ps : float
+        Time base that sizes the node grid (the start of the fit).
     """
-    t = jnp.asarray(captures.times_ps, jnp.float64)
-    w = jnp.asarray(captures.weights, jnp.float64)
+    n, z, k = captures.times_ps.shape
     n_bins = captures.counts.shape[-1]
     iters = float(captures.iterations)
-    pulse = None
-    if pulse_shape is not None:
-        p = np.asarray(pulse_shape, dtype=np.float64)
-        pulse = (jnp.asarray(pulse_t0_ps + pulse_step_ps * np.arange(p.size)), float(pulse_step_ps), jnp.asarray(p))
+    shape = None if pulse_shape is None else tuple(float(v) for v in pulse_shape)
+    nominal = SensorConfig(n_bins=n_bins, bin_width_ps=float(nominal_bin_width_ps),
+                           start_offset_ps=float(nominal_offset_ps), pulse_shape=shape,
+                           pulse_shape_step_ps=float(pulse_step_ps), pulse_shape_t0_ps=float(pulse_t0_ps),
+                           pulse_fwhm_ps=0.0, iterations=int(captures.iterations))
+    sigma_max = _param("pulse_fwhm_ps").hi / FWHM_PER_SIGMA
+    grid = TimeGrid.for_sensor(nominal, 0.0, 1e12, oversample=int(oversample), sigma_ps=sigma_max)
+    extent = irf_extent_ps(nominal, sigma_max)
+    pulse = pulse_boxes(nominal)
+    if pulse is not None:
+        pulse = (jnp.asarray(pulse[0]), pulse[1], jnp.asarray(pulse[2]))
+    t = jnp.asarray(captures.times_ps, jnp.float64).reshape(-1)
+    w = jnp.asarray(captures.weights, jnp.float64).reshape(-1)
+    rows = jnp.asarray(np.repeat(np.arange(n * z), k), jnp.int32)
+    zero_rows = jnp.arange(n * z, dtype=jnp.int32)
 
     def model(theta):
         scale, fwhm, bw, t0, noise, xt = (theta[i] for i in range(6))
-        edges = t0 + bw * jnp.arange(n_bins + 1, dtype=jnp.float64)
-        sigma = fwhm / FWHM_PER_SIGMA
-        sig = bin_arrivals(t, scale * w, edges, sigma, pulse)
-        zero = jnp.zeros(t.shape[:-1] + (1,))
-        cross = bin_arrivals(zero, jnp.full(zero.shape, 1.0) * xt, edges, sigma, pulse)
-        return iters * (sig + cross) + noise
+        nodes = deposit(grid, t, scale * w, rows, n * z, bin_width_ps=bw, start_offset_ps=t0)
+        nodes = nodes + deposit(grid, jnp.zeros(n * z), jnp.full(n * z, 1.0) * xt, zero_rows, n * z,
+                                bin_width_ps=bw, start_offset_ps=t0)
+        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=fwhm / FWHM_PER_SIGMA, pulse=pulse, extent_ps=extent,
+                         nominal_bin_width_ps=float(nominal_bin_width_ps))
+        return (iters * (nodes @ mat) + noise).reshape(n, z, n_bins)
 
     return jax.jit(model)
+
+
+def _param(name: str) -> Param:
+    return PARAMS[PARAM_NAMES.index(name)]
 
 
 def poisson_deviance(mu, counts, mask=None) -> float:
