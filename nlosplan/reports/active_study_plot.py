@@ -27,9 +27,13 @@ def active_rows(result: dict) -> list[dict]:
     rows = []
     for s in result["strategies"]:
         c = s["calibration"]
-        rows.append({"strategy": s["name"],
-                     "loc captures": f"{_n(s['captures_to_target'])} [{_iv(s['interval'])}]",
-                     "loc gantry s": f"{_n(s['gantry_seconds_to_target'])} [{_iv(s['gantry_interval'])}]",
+        row = {"strategy": s["name"]}
+        targets = s.get("targets") or [{"target_rmse_m": result["config"]["target_rmse_m"], **s}]
+        for t in targets:
+            mm = f"{1e3 * t['target_rmse_m']:g} mm"
+            row[f"captures to {mm}"] = f"{_n(t['captures_to_target'])} [{_iv(t['interval'])}]"
+            row[f"gantry s to {mm}"] = f"{_n(t['gantry_seconds_to_target'])} [{_iv(t['gantry_interval'])}]"
+        rows.append({**row,
                      "calib captures": f"{_n(c['captures_to_target'])} [{_iv(c['interval'])}]",
                      "calib gantry s": f"{_n(c['gantry_seconds_to_target'])} [{_iv(c['gantry_interval'])}]",
                      "run s": f"{s['seconds']:.0f}"})
@@ -42,10 +46,12 @@ def _header(result: dict) -> str:
     head = (f"active vs raster: {cfg['obj']} {cfg['size']}, {cfg['sensor']}, {result['candidates']} candidates "
             f"({cfg['grid']}x{cfg['grid']}), batches of {cfg['batch_size']}, budget {cfg['budget']}, seeds "
             f"{','.join(str(s) for s in cfg['seeds'])}; targets: localization RMSE <= "
-            f"{1e3 * cfg['target_rmse_m']:g} mm "
-            f"on {cfg['test_points']} test positions, calibration error <= {cfg['target_calibration']:g} tolerance")
-    if ratio is not None:
-        head += f"\nbest strategy / raster, captures to the localization target (medians): {ratio:.2f}"
+            f"{', '.join(f'{1e3 * t:g}' for t in sorted({cfg['target_rmse_m'], *cfg.get('more_targets_m', ())}))}"
+            f" mm on {cfg['test_points']} test positions, calibration error <= {cfg['target_calibration']:g} tolerance")
+    for target, r in (ratio or {}).items():
+        head += (f"\nlocalization RMSE <= {1e3 * float(target):g} mm: " + (
+            "n/r" if r is None else f"best strategy ({r['best']}) needs {r['ratio']:.2f} x the raster's captures "
+                                    f"({r['captures']:.0f} vs {r['raster_captures']:.0f}, medians)"))
     return head
 
 
