@@ -105,6 +105,9 @@ def _plan_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--zones", default="3x3", choices=["3x3", "4x4", "8x8"], help="TMF8828 zones (default: 3x3)")
     p.add_argument("--range", dest="range_mode", default="short", choices=["short", "long"],
                    help="ranging mode (default: short)")
+    p.add_argument("--sensor", default=None, metavar="NAME|FILE",
+                   help="sensor model of the captures and of the direct-view check "
+                        "(default: the tmf8828-<zones>-<range> preset)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
 
 
@@ -154,6 +157,7 @@ def _dry(args, factory):
 
 
 def _cmd_dry_run(args) -> int:
+    args.sensor_config = None if args.no_view_check else _sensor_config(args)
     factory, desc, spec, total = _build_plan(args)
     rep = _dry(args, factory)
     data = {"plan": desc, **rep.to_dict()}
@@ -169,6 +173,21 @@ def _cmd_dry_run(args) -> int:
     if rep.problems:
         raise UserError(f"the plan has {len(rep.problems)} problem(s); first: {rep.problems[0]}")
     return 0
+
+
+def _sensor_config(args):
+    """The ``--sensor`` model (its zones must be ``--zones``), or the mode's preset."""
+    from nlosplan.hardware.rig import sensor_preset
+
+    if args.sensor is None:
+        return sensor_preset(args.zones, args.range_mode)
+    from nlosplan.sensor_models import resolve_sensor
+
+    cfg = resolve_sensor(args.sensor)
+    if f"{cfg.zones_rows}x{cfg.zones_cols}" != args.zones or cfg.n_bins != 128:
+        raise UserError(f"--sensor {args.sensor!r} has {cfg.zones_rows}x{cfg.zones_cols} zones and {cfg.n_bins} bins; "
+                        f"the TMF8828 in --zones {args.zones} gives {args.zones} zones and 128 bins")
+    return cfg
 
 
 def _run_id(args, spec: dict) -> str:
@@ -191,6 +210,7 @@ def _cmd_capture(args) -> int:
         raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
     if args.emulate_faults and not args.emulate:
         raise UserError("--emulate-faults needs --emulate")
+    args.sensor_config = _sensor_config(args)
     factory, desc, spec, total = _build_plan(args)
     rep = _dry(args, factory)
     if rep.problems:
@@ -240,11 +260,12 @@ def _open(args):
         return emulated_rig(obj=args.object, size=args.size, zones=args.zones, range_mode=args.range_mode,
                             lights=args.lights == "on", seed=args.seed, time_scale=args.time_scale,
                             sensor_faults=sf, gantry_faults=gf, limits_mm=args.limits, feed_mm_min=args.feed,
-                            park_mm=park, home=args.home, unlock=args.unlock)
+                            park_mm=park, home=args.home, unlock=args.unlock, sensor_config=args.sensor_config)
 
     @contextmanager
     def real():
         rig = open_rig(args.lidar, args.gantry, zones=args.zones, range_mode=args.range_mode, baudrate=args.baud,
+                       sensor_config=args.sensor_config,
                        limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
                        home=args.home, unlock=args.unlock, park_mm=park)
         try:

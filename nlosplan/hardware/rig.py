@@ -168,7 +168,7 @@ def emulated_rig(*, obj: str = "A", size: str = "8in", zones: str = "3x3", range
                  frame_period_s: float = 0.02, sensor_faults=None, gantry_faults=None,
                  limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0, park_mm=(0.0, 0.0),
                  quiet_s: float = 0.05, frame_timeout: float = 5.0, gantry_settings: dict | None = None,
-                 home: bool = False, unlock: bool = False) -> Iterator[Rig]:
+                 home: bool = False, unlock: bool = False, sensor_config=None) -> Iterator[Rig]:
     """Both emulators on ptys, the production drivers opened on them, measuring.
 
     Parameters
@@ -188,6 +188,9 @@ def emulated_rig(*, obj: str = "A", size: str = "8in", zones: str = "3x3", range
     sensor_faults, gantry_faults : SensorFaults, GantryFaults, optional
     gantry_settings : dict, optional
         GRBL ``$N`` overrides (e.g. ``{22: 1}`` to need homing).
+    sensor_config : SensorConfig, optional
+        The model stored with the captures (default: the mode's preset, which
+        also makes the emulated histograms).
 
     Yields
     ------
@@ -199,7 +202,7 @@ def emulated_rig(*, obj: str = "A", size: str = "8in", zones: str = "3x3", range
     from nlosplan.hardware.lights import EmulatedLights
     from nlosplan.hardware.tmf8828 import TMF8828
 
-    cfg = sensor_preset(zones, range_mode)
+    cfg = sensor_config or sensor_preset(zones, range_mode)
     (x0, x1), (y0, y1) = limits_mm
     settings = {130: x1, 131: y1, **(gantry_settings or {})}
     light = EmulatedLights(lights)
