@@ -110,7 +110,8 @@ def _cmd(args) -> int:
                                 "batch": args.batch, "grid": args.grid, "seed": args.seed})
     plan = ask_tell_plan(loop.suggest, loop.tell, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
                          max_positions=args.budget)
-    args.emulate_faults, args.no_park = None, False  # what the shared rig opener reads
+    # what the rig CLI's opener (nlosplan.cli.rig._open) reads besides the options above
+    args.emulate_faults, args.no_park, args.sensor_config = None, False, sensor
     with CaptureStore(args.store) as store, _open(args) as rig:
         ex = Executor(rig, store, run_id=run_id, context=ctx)
         try:
