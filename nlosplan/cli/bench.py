@@ -169,6 +169,7 @@ def add(sub) -> None:
 # Further ``nlosplan bench NAME`` benchmarks, one module of nlosplan.cli each, with ``add_bench(bsub)``.
 MORE_BENCHES: tuple[str, ...] = (
     "bench_rig",
+    "bench_fidelity",
 )
 
 

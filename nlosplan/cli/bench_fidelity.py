@@ -1,0 +1,94 @@
+"""``nlosplan bench fidelity`` (error against run time of both simulators) and ``bench crossval``."""
+
+from __future__ import annotations
+
+import argparse
+
+from nlosplan.cli.common import emit, int_type, note, progress_bar
+
+FIDELITY_DESCRIPTION = """\
+Error against run time of both simulators on DENALI 3x3 (Lambertian objects
+A_8in at position 19 and circle_4in at 73): every fidelity level of the fast
+backend and of the Mitsuba twin, seconds per scene and the relative L1 error of
+the three-bounce histogram against a converged twin reference (its own error
+is measured from two independent halves and printed), and the speed-up of the
+fast backend over the twin at equal error. Takes a few minutes on 2 cores.
+JSON: {"rows": [{"backend", "fidelity", "seconds", "rel_l1_error"}...],
+"speedup_at_equal_error": number, "speedups", "reference", "config"}."""
+
+CROSSVAL_DESCRIPTION = """\
+Cross-validation of the twin against the fast backend on the DENALI rig with
+Lambertian objects: every object x size x position, normalized relative L1 of
+the background-subtracted three-bounce histogram (target <= 5 %) and centroid
+shift (target <= 0.5 bin, zones with >= 5 % of the signal). About 4 minutes
+for the default 60 cases on 2 cores. JSON: {"cases": [...], "summary": {...}}."""
+
+
+def _cmd_fidelity(args) -> int:
+    from nlosplan.simulators.mitsuba.bench import bench_fidelity, format_bench_fidelity
+
+    note(args, "bench fidelity: reference twin, then every level of both backends ...")
+    with progress_bar(args, 1 + 8, "bench fidelity", "step") as bar:
+        def progress(text):
+            if bar is not None:
+                bar.set_postfix_str(text[:60])
+                bar.update(1)
+
+        result = bench_fidelity(reference_spp=args.reference_spp, seed=args.seed, progress=progress)
+    text = format_bench_fidelity(result)
+    if args.plot:
+        from nlosplan.reports.fidelity_plot import plot_fidelity
+
+        path = plot_fidelity(result["rows"], args.plot, reference_self_error=result["reference"]["rel_l1_self_error"],
+                             title="fast backend vs Mitsuba twin: DENALI 3x3, Lambertian objects")
+        result["plot"] = str(path)
+        text += f"\nplot: {path}"
+    emit(args, result, text)
+    return 0
+
+
+def _cmd_crossval(args) -> int:
+    from nlosplan.simulators.mitsuba.crossval import cross_validate, format_table
+
+    objects = [o.strip() for o in args.objects.split(",") if o.strip()]
+    sizes = [z.strip() for z in args.sizes.split(",") if z.strip()]
+    positions = range(0, 100, 100 // args.positions)[: args.positions]
+    n = len(objects) * len(sizes) * len(positions)
+    with progress_bar(args, n, "bench crossval", "case") as bar:
+        def progress(text):
+            if bar is not None:
+                bar.set_postfix_str(text[:60])
+                bar.update(1)
+
+        result = cross_validate(objects, sizes, positions, twin_fidelity={"spp": args.spp, "zone_sub": 8},
+                                seed=args.seed, progress=progress)
+    emit(args, result, format_table(result))
+    return 0 if result["summary"]["passed"] == result["summary"]["cases"] else 1
+
+
+def _parser(bsub, name, help_text, description, example):
+    return bsub.add_parser(name, help=help_text, description=description, epilog=f"example:\n  {example}",
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def add_bench(bsub) -> None:
+    """``bench fidelity`` and ``bench crossval``."""
+    p = _parser(bsub, "fidelity", "error against run time of the fast backend and the Mitsuba twin, and the "
+                "speed-up at equal error", FIDELITY_DESCRIPTION,
+                "nlosplan bench fidelity --json --plot out/fidelity.png")
+    p.add_argument("--reference-spp", type=int_type(256, 1 << 20), default=32768,
+                   help="samples per pixel of the twin reference (default: %(default)s)")
+    p.add_argument("--seed", type=int_type(0, 2**31), default=0, help="twin seed (default: 0)")
+    p.add_argument("--plot", default="", help="PNG of error against run time (default: none)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_cmd_fidelity)
+    c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (Lambertian DENALI)",
+                CROSSVAL_DESCRIPTION, "nlosplan bench crossval --objects A,circle,3 --sizes 4in,8in --positions 10 --json")
+    c.add_argument("--objects", default="A,circle,3", help="DENALI objects (default: %(default)s)")
+    c.add_argument("--sizes", default="4in,8in", help="sizes (default: %(default)s)")
+    c.add_argument("--positions", type=int_type(1, 100), default=10,
+                   help="gantry positions, evenly spaced over 0..99 (default: %(default)s)")
+    c.add_argument("--spp", type=int_type(16, 1 << 20), default=4096, help="twin samples per pixel (default: 4096)")
+    c.add_argument("--seed", type=int_type(0, 2**31), default=0, help="twin seed (default: 0)")
+    c.add_argument("--json", action="store_true", help="machine-readable output")
+    c.set_defaults(func=_cmd_crossval)
