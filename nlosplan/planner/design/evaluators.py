@@ -28,6 +28,7 @@ import hashlib
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -46,7 +47,8 @@ DEFAULT_FIDELITY: dict[str, dict] = {
 
 def job_key(job: dict) -> str:
     """A stable id of an evaluation (what resume looks up)."""
-    fields = {k: job[k] for k in ("evaluator", "task", "design", "seed", "fidelity", "condition", "reference")}
+    fields = {k: job[k] for k in ("evaluator", "task", "design", "seed", "fidelity", "condition")}
+    fields["reference"] = Path(job["reference"]).name  # names carry the content hash: a moved OUT still resumes
     return hashlib.sha1(json.dumps(fields, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
