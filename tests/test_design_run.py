@@ -9,7 +9,7 @@ import pytest
 from nlosplan.planner.design.config import load_config, quick_config
 from nlosplan.planner.design.data import SceneSet, load_reference
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY, evaluate
-from nlosplan.planner.design.run import CHECKPOINT, DesignConfig, run_design
+from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, DesignConfig, run_design
 from nlosplan.planner.design.search import SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.reports.design_report import write_design_report
@@ -27,6 +27,17 @@ def tiny_config() -> DesignConfig:
         label="quick")
 
 
+def evaluations(out) -> list[dict]:
+    lines = (out / EVALUATIONS).read_text().splitlines()
+    out_rows = []
+    for line in lines:
+        try:
+            out_rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass
+    return out_rows
+
+
 @pytest.fixture(scope="module")
 def finished(tmp_path_factory):
     out = tmp_path_factory.mktemp("design")
@@ -37,11 +48,12 @@ def finished(tmp_path_factory):
 def test_run_records_every_evaluation_and_answers(finished):
     out, result = finished
     ckpt = json.loads((out / CHECKPOINT).read_text())
-    assert len(ckpt["results"]) == result["evaluations"] > 20
-    for r in ckpt["results"]:
+    results = evaluations(out)
+    assert len(results) == result["evaluations"] > 20
+    for r in results:
         assert {"design", "evaluator", "fidelity", "value", "lo", "hi", "seconds", "status"} <= set(r)
         assert r["status"] in ("ok", "unreachable", "failed") and r["seconds"] >= 0
-    assert {r["status"] for r in ckpt["results"]} == {"ok"}
+    assert {r["status"] for r in results} == {"ok"}
     assert ckpt["candidates"] is not None  # the optimize stage ran and was checkpointed
     rows = result["requirements"]
     assert {(r["task"], r["parameter"]) for r in rows} == {(t, a) for t in ("loc", "shape", "size")
@@ -85,13 +97,14 @@ def test_interrupted_run_resumes_to_the_same_answer(finished, tmp_path):
 
     with pytest.raises(Stop):
         run_design(tiny_config(), tmp_path, workers=1, progress=stop_after_ten)
-    partial = json.loads((tmp_path / CHECKPOINT).read_text())
-    assert len(partial["results"]) == 10
+    partial = evaluations(tmp_path)
+    assert len(partial) == 10
+    with open(tmp_path / EVALUATIONS, "a") as fh:  # a line torn by a kill -9 is ignored
+        fh.write('{"key": "torn", "evalu')
     resumed = run_design(tiny_config(), tmp_path, resume=True, workers=1)
-    final = json.loads((tmp_path / CHECKPOINT).read_text())
-    keys = [r["key"] for r in final["results"]]
+    keys = [r["key"] for r in evaluations(tmp_path)]
     assert len(keys) == len(set(keys)) == result["evaluations"]
-    assert keys[:10] == [r["key"] for r in partial["results"]]
+    assert keys[:10] == [r["key"] for r in partial]
     assert [r.get("feasible") for r in resumed["requirements"]] == [r.get("feasible") for r in result["requirements"]]
 
 
@@ -113,8 +126,8 @@ def test_dask_local_cluster_gives_the_same_evaluations(finished, tmp_path):
     cfg = tiny_config()
     res = run_design(cfg, tmp_path, cluster="local:2")
     assert res["provenance"]["executor"].startswith("dask LocalCluster")
-    a = {r["key"]: r for r in json.loads((out0 / CHECKPOINT).read_text())["results"] if r["evaluator"] == "bound"}
-    b = {r["key"]: r for r in json.loads((tmp_path / CHECKPOINT).read_text())["results"] if r["evaluator"] == "bound"}
+    a = {r["key"]: r for r in evaluations(out0) if r["evaluator"] == "bound"}
+    b = {r["key"]: r for r in evaluations(tmp_path) if r["evaluator"] == "bound"}
     common = set(a) & set(b)  # the same jobs (keys name the reference file, not its folder)
     assert len(common) >= 15
     for k in common:  # deterministic evaluators: identical values wherever they ran

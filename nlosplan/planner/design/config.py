@@ -98,7 +98,11 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
         cfg = replace(cfg, cost=CostModel.from_dict({**base.cost.to_dict(), **_table(data, "cost")}))
     if "search" in data:
         s = dict(_table(data, "search"))
-        fid = {k: {**v, **s.pop("fidelity", {}).get(k, {})} for k, v in base.search.fidelity.items()}
+        given = s.pop("fidelity", {})
+        bad = sorted(set(given) - set(base.search.fidelity))
+        if bad:
+            raise UserError(f"{p}: unknown evaluator(s) {', '.join(bad)} in [search.fidelity]; allowed: bound, trained")
+        fid = {k: {**v, **given.get(k, {})} for k, v in base.search.fidelity.items()}
         try:
             cfg = replace(cfg, search=replace(base.search, fidelity=fid, **s))
         except TypeError as exc:

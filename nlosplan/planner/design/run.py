@@ -1,9 +1,10 @@
 """``run_design``: references, the ask/tell search on an executor, a JSON checkpoint, the summary.
 
-The checkpoint (``OUT/design_checkpoint.json``) holds the configuration and
-every evaluation told so far (with its design, evaluator, fidelity, metric,
-interval, run time and status) and the optimize stage's candidates; it is
-rewritten atomically after every result. ``resume=True`` tells the search
+The checkpoint is ``OUT/design_checkpoint.json`` (the configuration and the
+optimize stage's candidates, rewritten atomically) and
+``OUT/design_evaluations.jsonl`` (every evaluation told so far, with its
+design, evaluator, fidelity, metric, interval, run time and status; one line
+appended and flushed per result). ``resume=True`` tells the search
 everything in it, so nothing already evaluated is computed again. The
 simulated references are saved beside it and reused when their
 configuration matches.
@@ -32,9 +33,10 @@ from nlosplan.planner.design.search import DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
 
-__all__ = ["DesignConfig", "run_design", "CHECKPOINT"]
+__all__ = ["DesignConfig", "run_design", "CHECKPOINT", "EVALUATIONS"]
 
 CHECKPOINT = "design_checkpoint.json"
+EVALUATIONS = "design_evaluations.jsonl"
 
 
 @dataclass(frozen=True)
@@ -106,10 +108,17 @@ def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
 
 
 class _Checkpoint:
+    """``design_checkpoint.json`` (configuration, candidates) + ``design_evaluations.jsonl`` (one result per line).
+
+    Results are appended and flushed one line at a time, so a killed run
+    loses at most the evaluation in flight; a torn last line is ignored.
+    """
+
     def __init__(self, path: Path, cfg: DesignConfig, resume: bool):
         self.path = path
-        self.data = {"config_hash": cfg.hash(), "config": cfg.to_dict(), "results": [], "candidates": None,
-                     "optimize_log": []}
+        self.log = path.with_name(EVALUATIONS)
+        self.data = {"config_hash": cfg.hash(), "config": cfg.to_dict(), "candidates": None, "optimize_log": []}
+        self.results: list[dict] = []
         if path.exists() and resume:
             try:
                 old = json.loads(path.read_text())
@@ -119,13 +128,34 @@ class _Checkpoint:
                 raise UserError(f"{path} is from a run with another configuration; use another --out, "
                                 "or run without --resume to start over (the old checkpoint is kept as .bak)")
             self.data = old
-        elif path.exists():
-            path.replace(path.with_name(path.name + ".bak"))
+            if self.log.exists():
+                for line in self.log.read_text().splitlines():
+                    try:
+                        self.results.append(json.loads(line))
+                    except json.JSONDecodeError:  # the line being written when the run was killed
+                        continue
+        else:
+            for old in (path, self.log):
+                if old.exists():
+                    old.replace(old.with_name(old.name + ".bak"))
+            self.save()
+        torn = self.log.exists() and self.log.stat().st_size > 0 and not self.log.read_bytes().endswith(b"\n")
+        self._fh = open(self.log, "a")
+        if torn:
+            self._fh.write("\n")  # end the torn line so the next result starts its own
+
+    def add(self, result: dict) -> None:
+        self.results.append(result)
+        self._fh.write(json.dumps(result, default=_json_default) + "\n")
+        self._fh.flush()
 
     def save(self) -> None:
         tmp = self.path.with_name(self.path.name + ".part")
         tmp.write_text(json.dumps(self.data, default=_json_default))
         tmp.replace(self.path)
+
+    def close(self) -> None:
+        self._fh.close()
 
 
 def _json_default(o):
@@ -211,7 +241,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume)
     sims, real, ref_info = _references(cfg, out, say)
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
-    for r in ckpt.data["results"]:
+    for r in ckpt.results:
         search.tell(r)
     if ckpt.data.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
@@ -219,7 +249,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
         search.stage = "optimize"
     executor = make_executor(workers, cluster)
     try:
-        done = len(ckpt.data["results"])
+        done = len(ckpt.results)
         stability = None
         while True:
             jobs = search.ask()
@@ -238,8 +268,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
             total = done + len(jobs)
             for _, result in executor.map(evaluate, jobs):
                 search.tell(result)
-                ckpt.data["results"].append(result)
-                ckpt.save()
+                ckpt.add(result)
                 done += 1
                 say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
                     done, total)
@@ -247,6 +276,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
         executor_name = executor.name
     finally:
         executor.close()
+        ckpt.close()
     result = summarize(search)
     result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=ref_info,
                   stability=stability, checkpoint=str(out / CHECKPOINT))
