@@ -6,7 +6,8 @@ physics there). Reference: the twin at ``reference_spp`` samples per pixel
 reported). Error: relative L1 of the three-bounce histogram summed over the
 scenes; seconds: per scene, compile and scene loading included for the
 twin's render (what a user waits for), JAX compile excluded for the fast
-backend (a warm-up call per level). The speed-up at equal error compares
+backend (a warm-up call per level, then the mean of 5 calls; also batched:
+the scenes' objects at 10 positions each in one call). The speed-up at equal error compares
 each fast level's time with the twin's time at the same error, interpolated
 in log-log between twin levels (or extrapolated with the Monte-Carlo slope
 ``error ~ time^-1/2`` beyond them).
@@ -77,11 +78,19 @@ def bench_fidelity(*, fast_levels=FAST_LEVELS, twin_levels=TWIN_LEVELS, scenes=S
     for level in fast_levels:
         sims = [FastSimulator(x, s, fidelity=level, dtype="float32") for x in sc]
         for sim in sims:
-            sim.expected()  # compile
+            sim.expected(parts=True)  # compile (the same static arguments as the timed call)
+        reps = 5
         t = time.perf_counter()
-        outs = [sim.expected(parts=True)["object"] for sim in sims]
-        sec = (time.perf_counter() - t) / len(sc)
-        rows.append({"backend": "fast", "fidelity": level, "seconds": sec,
+        for _ in range(reps):
+            outs = [sim.expected(parts=True)["object"] for sim in sims]
+        sec = (time.perf_counter() - t) / (reps * len(sc))
+        batch = FastSimulator([denali_scene(o, z, p, reflectance="lambertian") for o, z, _ in scenes
+                               for p in range(0, 100, 10)], s, fidelity=level, dtype="float32")
+        batch.expected(parts=True)  # compile
+        t = time.perf_counter()
+        batch.expected(parts=True)
+        sec_batched = (time.perf_counter() - t) / len(batch.scenes)
+        rows.append({"backend": "fast", "fidelity": level, "seconds": sec, "seconds_batched": sec_batched,
                      "rel_l1_error": _rel_l1(np.stack(outs), np.stack(ref))})
         tell(f"fast {level}: {100 * rows[-1]['rel_l1_error']:.2f} %")
     for level in twin_levels:
@@ -94,8 +103,11 @@ def bench_fidelity(*, fast_levels=FAST_LEVELS, twin_levels=TWIN_LEVELS, scenes=S
     twin_rows = [r for r in rows if r["backend"] == "mitsuba"]
     speedups = {r["fidelity"]: twin_time_at_error(twin_rows, r["rel_l1_error"]) / r["seconds"]
                 for r in rows if r["backend"] == "fast"}
+    batched = {r["fidelity"]: twin_time_at_error(twin_rows, r["rel_l1_error"]) / r["seconds_batched"]
+               for r in rows if r["backend"] == "fast"}
     key = "default" if "default" in speedups else next(iter(speedups))
     return {"rows": rows, "speedup_at_equal_error": speedups[key], "speedup_level": key, "speedups": speedups,
+            "speedup_at_equal_error_batched": batched[key], "speedups_batched": batched,
             "reference": {"spp": reference_spp, "zone_sub": 8, "rel_l1_self_error": ref_self,
                           "seconds_per_scene": ref_seconds},
             "config": {"sensor": sensor, "scenes": [f"{o}_{z} p{p}" for o, z, p in scenes],
@@ -104,13 +116,19 @@ def bench_fidelity(*, fast_levels=FAST_LEVELS, twin_levels=TWIN_LEVELS, scenes=S
 
 def format_bench_fidelity(result: dict) -> str:
     """The rows as a Markdown table and the speed-up line."""
-    lines = ["| backend | fidelity | seconds / scene | rel. L1 vs twin reference |", "|---|---|---|---|"]
+    lines = ["| backend | fidelity | seconds / scene | seconds / scene, batched | rel. L1 vs twin reference |",
+             "|---|---|---|---|---|"]
     for r in result["rows"]:
-        lines.append(f"| {r['backend']} | {r['fidelity']} | {r['seconds']:.4g} | {100 * r['rel_l1_error']:.2f} % |")
+        b = f"{r['seconds_batched']:.4g}" if "seconds_batched" in r else "-"
+        lines.append(f"| {r['backend']} | {r['fidelity']} | {r['seconds']:.4g} | {b} | {100 * r['rel_l1_error']:.2f} % |")
     ref = result["reference"]
     lines.append(f"reference: twin at {ref['spp']} spp ({ref['seconds_per_scene']:.1f} s / scene), own error "
                  f"{100 * ref['rel_l1_self_error']:.2f} %")
     lines.append(f"speed-up of the fast backend over the twin at equal error ({result['speedup_level']}): "
                  f"{result['speedup_at_equal_error']:.0f}x; per level: " +
                  ", ".join(f"{k} {v:.0f}x" for k, v in result["speedups"].items()))
+    if "speedups_batched" in result:
+        lines.append(f"batched over 20 positions per call: {result['speedup_at_equal_error_batched']:.0f}x at "
+                     f"{result['speedup_level']}; per level: " +
+                     ", ".join(f"{k} {v:.0f}x" for k, v in result["speedups_batched"].items()))
     return "\n".join(lines)
