@@ -171,3 +171,17 @@ def test_toml_configuration_overrides_and_errors(tmp_path):
     p.write_text("[cost]\nzonez = 1\n")
     with pytest.raises(UserError, match="unknown cost weight"):
         load_config(p, quick_config())
+
+
+def test_design_studies_restrict_the_axes():
+    from nlosplan.errors import UserError
+    from nlosplan.experiments.design_studies import study_config
+
+    res = study_config("resolution", quick=True)
+    assert res.space.axes == ("zones",) and res.space.zones == ((1, 1), (2, 2), (3, 3), (4, 4), (8, 8))
+    assert res.label.startswith("quick") and len(res.scenes.objects) == 10
+    bins = study_config("bins")
+    assert bins.space.axes == ("bin_factor", "n_bins") and bins.space.bin_factors == (1, 2, 4, 8)
+    assert bins.space.zones == ((3, 3),) and len(bins.scenes.objects) == 30
+    with pytest.raises(UserError, match="unknown study 'speed'"):
+        study_config("speed")

@@ -132,6 +132,11 @@ EXAMPLES = {
         "nlosplan benchmark --store out/denali.sqlite --where zones=3x3 --models mlp,cnn1d --tasks loc,shape "
         "--split positions --small --json",
     ),
+    "study resolution": (
+        "nlosplan study resolution --quick",
+        "nlosplan study resolution --requirement 'loc<=0.03' --out out/resolution --json",
+    ),
+    "study bins": "nlosplan study bins --quick --out out/bins",
     "study jitter": (
         "nlosplan study jitter --store out/sim3x3.sqlite --where lights=off --out out/jitter",
         "nlosplan study jitter --store out/sim3x3.sqlite --small --jitter-ps 0,100,300,600 --models mlp,cnn1d,cnn3d "

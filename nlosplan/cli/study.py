@@ -195,5 +195,6 @@ def add(sub) -> None:
 
 # Further ``nlosplan study NAME`` studies, one module of nlosplan.cli each, with ``add_study(ssub)``.
 MORE_STUDIES: tuple[str, ...] = (
+    "study_design",
     "study_active",
 )

@@ -272,7 +272,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
                 done += 1
                 say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
                     done, total)
-        stability = _stability(cfg.label == "quick")
+        stability = _stability(cfg.label.startswith("quick"))
         executor_name = executor.name
     finally:
         executor.close()
