@@ -11,7 +11,7 @@ results (anything already told is not asked again). Stages:
 2. **curves** — trained models at the grid points whose bound meets the
    requirement (a design that fails its bound fails every model: it is
    recorded as screened out, not trained).
-3. **refine** — bisection on the continuous axes (jitter, pulse, photons),
+3. **refine** — bisection on the continuous axes (jitter, pulse, photons) and bins,
    between the last grid point that meets a requirement and the first that
    does not (the metric is monotone in them), ``refine_steps`` times.
 4. **optimize** — for every discrete choice (zones x bin width) and task,
@@ -242,7 +242,7 @@ class DesignSearch:
         jobs = []
         for req in self.requirements:
             for axis, layout, base, designs in self.lines():
-                if axis not in CONTINUOUS or layout != self._layout(self.base):
+                if (axis not in CONTINUOUS and axis != "n_bins") or layout != self._layout(self.base):
                     continue
                 pts = self.line_points(req, axis, base)
                 grid = set(designs)
@@ -253,8 +253,14 @@ class DesignSearch:
                 if bracket is None:
                     continue
                 a, b = bracket
-                mid = math.sqrt(a * b) if axis == "photon_fraction" else 0.5 * (a + b)
-                d = base.replace(**{axis: float(round(mid, 6))})
+                if axis == "n_bins":  # whole bins: stop when the bracket is one bin wide
+                    mid = int(round(0.5 * (a + b)))
+                    if mid in (int(a), int(b)):
+                        continue
+                    d = base.replace(n_bins=mid)
+                else:
+                    mid = math.sqrt(a * b) if axis == "photon_fraction" else 0.5 * (a + b)
+                    d = base.replace(**{axis: float(round(mid, 6))})
                 if self.bound_meets(req, d) or self.result("bound", req, d) is None:
                     if self.result("bound", req, d) is None:
                         jobs.append(self.job("bound", req, d))

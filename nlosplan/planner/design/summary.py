@@ -64,6 +64,10 @@ def requirement_row(search: DesignSearch, req: Requirement, axis: str) -> dict:
            "note": ""}
     if value is not None:
         ends = [v for v in (a, b) if v is not None]
+        i = xs.index(value) if value in xs else -1
+        if i > 0 and tv[i - 1] is None:  # the cheaper neighbour was screened out: the threshold lies between
+            ends.append(xs[i - 1])
+            row["note"] = f"between {xs[i - 1]:.4g} (screened out by the bound) and {value:.4g}"
         if b is None:
             row["note"] = "the pessimistic bound never meets it within the range"
             ends.append(xs[-1])
