@@ -29,9 +29,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
-# The main job (until the design planner lands): simulate the default scene.
+# The main job: the least hardware per NLOS task on the DENALI preset (report in nlosplan-out/design).
 demo: setup
-	$(BIN)/nlosplan simulate --out nlosplan-out/histogram.npy --plot nlosplan-out/histogram.png
+	$(BIN)/nlosplan design
 
 test: setup
 	$(BIN)/python -m pytest -q

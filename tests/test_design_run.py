@@ -185,3 +185,26 @@ def test_design_studies_restrict_the_axes():
     assert bins.space.zones == ((3, 3),) and len(bins.scenes.objects) == 30
     with pytest.raises(UserError, match="unknown study 'speed'"):
         study_config("speed")
+
+
+def _chromium():
+    import shutil
+
+    return next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+
+
+@pytest.mark.skipif(_chromium() is None, reason="Chromium is not installed")
+def test_report_opens_in_headless_chromium_with_every_image(finished):
+    import subprocess
+
+    out, result = finished
+    write_design_report(result, out)
+    proc = subprocess.run([_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
+                           "--v=0", "--virtual-time-budget=5000", "--dump-dom", (out / "report.html").as_uri()],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    dom = proc.stdout
+    n = dom.count("<img ")
+    assert n >= 5 and f'data-images="{n}"' in dom and f'data-images-loaded="{n}"' in dom
+    console = [line for line in proc.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+    assert console == []

@@ -234,5 +234,9 @@ def _html(result, sections, plots, stab_text, failures, unreachable, prov) -> st
                  f"seeds {prov['seeds']}</li><li>versions: "
                  + html.escape(", ".join(f"{k} {v}" for k, v in prov["versions"].items())) + "</li></ul>"
                  f"<pre>{html.escape(json.dumps(prov['config'], indent=1))}</pre>")
+    # for headless checks: how many images decoded (the report works without it)
+    parts.append("<script>window.addEventListener('load',()=>{const i=[...document.images];"
+                 "document.body.dataset.images=i.length;"
+                 "document.body.dataset.imagesLoaded=i.filter(x=>x.complete&&x.naturalWidth>0).length;});</script>")
     parts.append("</body></html>")
     return "\n".join(parts)
