@@ -89,22 +89,32 @@ def _faults(text: str) -> dict:
     return out
 
 
-def _plan_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--plan", default="raster", metavar="raster|FILE",
-                   help="'raster' (DENALI's 10x10 snake) or a positions file (CSV/text 'x_mm,y_mm' lines, or JSON)")
-    p.add_argument("--positions", type=_range_list, default=None, metavar="0-9,45",
-                   help="raster only: these grid indices, in this order (default: all 100)")
+def add_motion_options(p: argparse.ArgumentParser) -> None:
+    """--repeats, --settle, --limits, --feed (shared by the rig subcommands that move the gantry)."""
     p.add_argument("--repeats", type=int_type(1, 1000), default=3, help="captures per position (default: 3)")
     p.add_argument("--settle", type=number_type(float, zero_ok=True), default=0.5, metavar="S",
                    help="seconds to wait after each move (default: 0.5)")
     p.add_argument("--limits", type=_limits, default=((0.0, 320.0), (0.0, 320.0)), metavar="X0:X1,Y0:Y1",
                    help="gantry soft limits in mm (default: 0:320,0:320)")
     p.add_argument("--feed", type=number_type(float), default=3000.0, help="feed rate, mm/min (default: 3000)")
-    p.add_argument("--object", default="A", help="hidden object label (default: A)")
-    p.add_argument("--size", default="8in", help="object size label (default: 8in)")
+
+
+def add_mode_options(p: argparse.ArgumentParser) -> None:
+    """--zones and --range of the TMF8828."""
     p.add_argument("--zones", default="3x3", choices=["3x3", "4x4", "8x8"], help="TMF8828 zones (default: 3x3)")
     p.add_argument("--range", dest="range_mode", default="short", choices=["short", "long"],
                    help="ranging mode (default: short)")
+
+
+def _plan_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plan", default="raster", metavar="raster|FILE",
+                   help="'raster' (DENALI's 10x10 snake) or a positions file (CSV/text 'x_mm,y_mm' lines, or JSON)")
+    p.add_argument("--positions", type=_range_list, default=None, metavar="0-9,45",
+                   help="raster only: these grid indices, in this order (default: all 100)")
+    add_motion_options(p)
+    p.add_argument("--object", default="A", help="hidden object label (default: A)")
+    p.add_argument("--size", default="8in", help="object size label (default: 8in)")
+    add_mode_options(p)
     p.add_argument("--sensor", default=None, metavar="NAME|FILE",
                    help="sensor model of the captures and of the direct-view check "
                         "(default: the tmf8828-<zones>-<range> preset)")

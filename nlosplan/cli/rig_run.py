@@ -142,7 +142,7 @@ def _cmd(args) -> int:
 
 def add_rig(rsub) -> None:
     """Register ``nlosplan rig run``."""
-    from nlosplan.cli.rig import _limits
+    from nlosplan.cli.rig import add_mode_options, add_motion_options
     from nlosplan.planner.capture import STRATEGIES
 
     p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",
@@ -164,17 +164,10 @@ def add_rig(rsub) -> None:
     p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
     p.add_argument("--out", default="nlosplan-out/rig-run", metavar="DIR",
                    help="planner checkpoint, batch plots, rig_run.json (default: %(default)s)")
-    p.add_argument("--repeats", type=int_type(1, 100), default=3, help="captures per position (default: 3)")
-    p.add_argument("--settle", type=number_type(float, zero_ok=True), default=0.5, metavar="S",
-                   help="seconds after each move (default: 0.5)")
-    p.add_argument("--limits", type=_limits, default=((0.0, 320.0), (0.0, 320.0)), metavar="X0:X1,Y0:Y1",
-                   help="gantry limits in mm (default: 0:320,0:320)")
-    p.add_argument("--feed", type=number_type(float), default=3000.0, help="feed rate, mm/min (default: 3000)")
+    add_motion_options(p)
     p.add_argument("--object", default="A", help="DENALI object (default: A)")
     p.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: 8in)")
-    p.add_argument("--zones", default="3x3", choices=["3x3", "4x4", "8x8"], help="TMF8828 zones (default: 3x3)")
-    p.add_argument("--range", dest="range_mode", default="short", choices=["short", "long"],
-                   help="ranging mode (default: short)")
+    add_mode_options(p)
     p.add_argument("--lights", default="off", choices=["off", "on"], help="room lights (off only, for now)")
     p.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
                    help="TMF8828 firmware baud rate (default: 2000000)")

@@ -189,24 +189,28 @@ class Grbl:
             No banner (wrong port or baud rate, not GRBL).
         """
         self._write(b"\r\n\r\n")
-        deadline = time.monotonic() + timeout / 2
         for attempt in range(2):
-            while time.monotonic() < deadline:
-                try:
-                    line = self._reader.readline(max(deadline - time.monotonic(), 0.01))
-                except DeviceTimeout:
-                    break
-                try:
-                    if self._handle(line, "at connect") == "banner":
-                        self._after_banner()
-                        return self.banner
-                except GrblAlarm:
-                    continue
+            if self._await_banner(time.monotonic() + timeout / 2, "at connect"):
+                return self.banner
             if attempt == 0:
                 self._write(b"\x18")
-                deadline = time.monotonic() + timeout / 2
         raise DeviceTimeout(f"no GRBL banner from {self.port_name} within {timeout:g} s "
                             "(wrong port or baud rate, or not GRBL 1.1?)")
+
+    def _await_banner(self, deadline: float, context: str) -> bool:
+        """Read lines until a banner (then drain what follows it) or the deadline; alarms before it are skipped."""
+        while time.monotonic() < deadline:
+            try:
+                line = self._reader.readline(max(deadline - time.monotonic(), 0.01))
+            except DeviceTimeout:
+                return False
+            try:
+                if self._handle(line, context) == "banner":
+                    self._after_banner()
+                    return True
+            except GrblAlarm:
+                continue
+        return False
 
     def _after_banner(self) -> None:
         # drain the feedback that follows a banner ([MSG:'$H'|'$X' to unlock] when homing is enabled)
@@ -308,18 +312,8 @@ class Grbl:
     def soft_reset(self, timeout: float = 5.0) -> str:
         """0x18: reset GRBL (a reset during motion raises ALARM:3 afterwards); returns the new banner."""
         self._write(b"\x18")
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                line = self._reader.readline(max(deadline - time.monotonic(), 0.01))
-            except DeviceTimeout:
-                break
-            try:
-                if self._handle(line, "at reset") == "banner":
-                    self._after_banner()
-                    return self.banner
-            except GrblAlarm:
-                continue
+        if self._await_banner(time.monotonic() + timeout, "at reset"):
+            return self.banner
         raise DeviceTimeout(f"no GRBL banner within {timeout:g} s after a soft reset")
 
     # ------------------------------------------------------------------ motion

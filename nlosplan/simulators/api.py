@@ -185,7 +185,25 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
     kw = dict(fidelity=fidelity, zones=zones, dtype=dtype, prune=prune)
     sim = _simulator(scene, sensor, backend, **kw)
     out = sim.expected(parts=True)
-    bg_sim = FastSimulator(scene.without_objects(), sensor, **kw)
+    return assemble_result(sim, out, FastSimulator(scene.without_objects(), sensor, **kw), rng, repeats,
+                           plan=sim.plan, t0=t0, meta=dict(scene.meta))
+
+
+def assemble_result(sim, parts: dict, bg_sim, rng, repeats: int, *, plan, t0: float, meta: dict) -> SimulationResult:
+    """A :class:`SimulationResult` from a backend's simulator with and without the objects.
+
+    Parameters
+    ----------
+    sim, bg_sim
+        Simulators of the scene and of the scene without its objects (``expected()``, ``sample(key, n)``).
+    parts : dict
+        ``sim.expected(parts=True)`` (its ``counts`` is the expected capture).
+    rng : int or jax random key
+        Seed of the noisy captures (used when ``repeats > 0``).
+    repeats : int
+    plan, t0, meta
+        The plan (None for backends without one), the start time and the scene labels.
+    """
     background = bg_sim.expected()
     counts = bg_counts = None
     if repeats:
@@ -194,7 +212,8 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
         key = jax.random.key(int(rng)) if isinstance(rng, (int, np.integer)) else rng
         k1, k2 = jax.random.split(key)
         counts, bg_counts = sim.sample(k1, repeats), bg_sim.sample(k2, repeats)
-    expected = out.pop("counts")
-    return SimulationResult(expected=expected, background=background, signal=expected - background, parts=out,
-                            counts=counts, background_counts=bg_counts, plan=sim.plan,
-                            seconds=time.perf_counter() - t0, meta=dict(scene.meta))
+    parts = dict(parts)
+    expected = parts.pop("counts")
+    return SimulationResult(expected=expected, background=background, signal=expected - background, parts=parts,
+                            counts=counts, background_counts=bg_counts, plan=plan,
+                            seconds=time.perf_counter() - t0, meta=meta)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from nlosplan.errors import UserError
+from nlosplan.simulators.levels import resolve_level
 
 
 @dataclass(frozen=True)
@@ -66,16 +67,4 @@ FIDELITY_LEVELS: dict[str, Fidelity] = {
 
 def resolve_fidelity(value: Any) -> Fidelity:
     """A :class:`Fidelity` from a level name, a mapping of knobs, or a Fidelity."""
-    if isinstance(value, Fidelity):
-        return value
-    if isinstance(value, str):
-        if value not in FIDELITY_LEVELS:
-            raise UserError(f"unknown fidelity {value!r}; allowed: {', '.join(FIDELITY_LEVELS)}")
-        return FIDELITY_LEVELS[value]
-    if isinstance(value, dict):
-        known = {f.name for f in dataclasses.fields(Fidelity)}
-        bad = sorted(set(value) - known)
-        if bad:
-            raise UserError(f"unknown fidelity knob(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
-        return Fidelity(**value)
-    raise UserError(f"fidelity must be a level name ({', '.join(FIDELITY_LEVELS)}) or a Fidelity, not {value!r}")
+    return resolve_level(value, FIDELITY_LEVELS, Fidelity, "fidelity")

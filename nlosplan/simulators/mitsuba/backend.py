@@ -46,7 +46,7 @@ def simulate(scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", z
         ``plan`` is None (the twin has no plan of left-out terms); ``meta``
         gains ``twin``: fidelity, variant, seed, render seconds.
     """
-    from nlosplan.simulators.api import SimulationResult
+    from nlosplan.simulators.api import assemble_result
 
     t0 = time.perf_counter()
     if repeats and rng is None:
@@ -58,15 +58,5 @@ def simulate(scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", z
     bg_sim = TwinSimulator(scene.without_objects(), sensor, fidelity=fidelity, zones=zones, seed=seed,
                            variant=variant, illumination=illumination)
     bg_sim._transient = {**sim.transient(), "object": np.zeros_like(sim.transient()["object"])}
-    background = bg_sim.expected()
-    counts = bg_counts = None
-    if repeats:
-        import jax
-
-        key = jax.random.key(int(rng)) if isinstance(rng, (int, np.integer)) else rng
-        k1, k2 = jax.random.split(key)
-        counts, bg_counts = sim.sample(k1, repeats), bg_sim.sample(k2, repeats)
-    expected_counts = out.pop("counts")
-    return SimulationResult(expected=expected_counts, background=background, signal=expected_counts - background,
-                            parts=out, counts=counts, background_counts=bg_counts, plan=None,
-                            seconds=time.perf_counter() - t0, meta={**scene.meta, "twin": sim.describe()})
+    return assemble_result(sim, out, bg_sim, rng, repeats, plan=None, t0=t0,
+                           meta={**scene.meta, "twin": sim.describe()})

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from nlosplan.errors import UserError
+from nlosplan.simulators.levels import resolve_level
 
 
 @dataclass(frozen=True)
@@ -58,16 +59,4 @@ TWIN_LEVELS: dict[str, TwinFidelity] = {
 
 def resolve_twin_fidelity(value: Any) -> TwinFidelity:
     """A :class:`TwinFidelity` from a level name, a mapping of knobs, or a TwinFidelity."""
-    if isinstance(value, TwinFidelity):
-        return value
-    if isinstance(value, str):
-        if value not in TWIN_LEVELS:
-            raise UserError(f"unknown twin fidelity {value!r}; allowed: {', '.join(TWIN_LEVELS)}")
-        return TWIN_LEVELS[value]
-    if isinstance(value, dict):
-        known = {f.name for f in dataclasses.fields(TwinFidelity)}
-        bad = sorted(set(value) - known)
-        if bad:
-            raise UserError(f"unknown twin fidelity knob(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
-        return TwinFidelity(**value)
-    raise UserError(f"fidelity must be a level name, a dict of knobs or a TwinFidelity, not {type(value).__name__}")
+    return resolve_level(value, TWIN_LEVELS, TwinFidelity, "twin fidelity")
