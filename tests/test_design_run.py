@@ -208,3 +208,30 @@ def test_report_opens_in_headless_chromium_with_every_image(finished):
     assert n >= 5 and f'data-images="{n}"' in dom and f'data-images-loaded="{n}"' in dom
     console = [line for line in proc.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
     assert console == []
+
+
+def test_real_captures_backend_marks_unreachable_designs_and_compares_with_simulation(tmp_path):
+    """A store of 3x3 captures as the 'real' backend: 1x1 is a pooling of it, 2x2 is not."""
+    from nlosplan.tasks.build import build_dataset
+    from nlosplan.tasks.store import CaptureStore
+
+    store = tmp_path / "real.sqlite"
+    with CaptureStore(store) as st:
+        build_dataset(st, sensor="tmf8828-3x3-short", objects=["A", "S", "circle"], positions=range(0, 100, 10),
+                      repeats=2, fidelity="draft", seed=5)
+    cfg = replace(tiny_config(), space=DesignSpace(zones=((1, 1), (2, 2), (3, 3)), bin_factors=(1, 2),
+                                                   axes=("zones", "jitter_fwhm_ps")),
+                  real=str(store), real_where={"lights": "off"})
+    result = run_design(cfg, tmp_path / "out", workers=1)
+    rows = evaluations(tmp_path / "out")
+    real_2x2 = [r for r in rows if r["evaluator"] == "trained" and r["design"]["zones"] == "2x2"]
+    assert real_2x2 and all(r["status"] == "unreachable" and "not a pooling of the captured 3x3" in r["reason"]
+                            for r in real_2x2)
+    assert any(r["evaluator"] == "trained" and r["design"]["zones"] == "1x1" and r["status"] == "ok" for r in rows)
+    assert any("2x2" in u for u in result["unreachable"])
+    assert result["references"]["real"]["captures"] == 3 * 2 * 10 * 2
+    dis = result["disagreements"]
+    assert dis and all({"real", "sim", "disagree"} <= set(d) for d in dis)
+    paths = write_design_report(result, tmp_path / "out")
+    assert "Simulated against real captures" in (tmp_path / "out" / "report.md").read_text()
+    assert paths["html"].endswith("report.html")

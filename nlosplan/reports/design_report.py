@@ -108,6 +108,19 @@ def _evaluator_rows(summary: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _disagreement_rows(summary: dict) -> pd.DataFrame:
+    rows = []
+    for d in summary.get("disagreements", []):
+        task = d["requirement"].split()[0]
+        rows.append({"requirement": d["requirement"], "design": d["design"],
+                     "real captures": f"{_fmt_metric(task, d['real'])} [{_fmt_metric(task, d['real_lo'])}, "
+                                      f"{_fmt_metric(task, d['real_hi'])}]",
+                     "simulated": f"{_fmt_metric(task, d['sim'])} [{_fmt_metric(task, d['sim_lo'])}, "
+                                  f"{_fmt_metric(task, d['sim_hi'])}]",
+                     "disagree": "YES" if d["disagree"] else "no"})
+    return pd.DataFrame(rows)
+
+
 def _headline(summary: dict, ref_bin_ps: float) -> str:
     parts = []
     for c in summary["cheapest"]:
@@ -166,6 +179,11 @@ def write_design_report(result: dict, out) -> dict:
         ("Evaluators: error against run time", "Every evaluation records its run time and interval.",
          _evaluator_rows(result)),
     ]
+    if result.get("disagreements"):
+        n = sum(d["disagree"] for d in result["disagreements"])
+        sections.append(("Simulated against real captures",
+                         f"The same designs trained on real and on simulated captures; {n} of "
+                         f"{len(result['disagreements'])} disagree (95 % intervals apart).", _disagreement_rows(result)))
     md = [f"# nlosplan design — minimum hardware per NLOS task ({result['provenance']['config']['label']} run)", ""]
     for title, text, df in sections:
         md += [f"## {title}", "", text, "", markdown_table(df) if len(df) else "(none)", ""]

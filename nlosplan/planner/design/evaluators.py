@@ -166,7 +166,8 @@ def evaluate(job: dict) -> dict:
     Parameters
     ----------
     job : dict
-        ``evaluator`` (``"bound"``/``"trained"``), ``task``, ``design``
+        ``evaluator`` (``"bound"``, ``"trained"``, or ``"trained_sim"``: trained on
+        simulated captures when ``trained`` reads real ones), ``task``, ``design``
         (:meth:`Design.to_dict`), ``seed``, ``fidelity`` (dict of knobs),
         ``condition`` (``"col=value"`` or None), ``reference`` (path of the
         saved :class:`~nlosplan.planner.design.data.ReferenceData` of the

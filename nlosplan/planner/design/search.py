@@ -133,7 +133,7 @@ class DesignSearch:
     def job(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> dict:
         refs = self.trained_references if evaluator == "trained" else self.references
         job = {"evaluator": evaluator, "task": req.task, "design": d.to_dict(), "seed": int(seed),
-               "fidelity": self.config.fidelity[evaluator],
+               "fidelity": self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator],
                "condition": None if req.condition is None else "=".join(req.condition),
                "reference": str(refs[self._layout(d)]), "reference_sensor": self.space.sensor.to_dict()}
         job["key"] = job_key(job)
@@ -195,8 +195,11 @@ class DesignSearch:
         if self.stage == "refine":
             return self._refine_jobs()
         if self.stage == "verify":
-            return [self.job("trained", r, c["design"], s) for r in self.requirements
+            jobs = [self.job("trained", r, c["design"], s) for r in self.requirements
                     for c in self.candidates.get(r.name, []) for s in range(self.config.seeds)]
+            if self.has_real:  # the same designs trained on simulated captures: where do sim and real disagree?
+                jobs += [self.job("trained_sim", r, d) for r in self.requirements for d in self.trained_designs(r)]
+            return jobs
         return []
 
     def _advance(self) -> bool:
@@ -207,6 +210,31 @@ class DesignSearch:
         return True
 
     # --------------------------------------------------------------- stages
+    @property
+    def has_real(self) -> bool:
+        """The trained evaluator reads real captures (and ``trained_sim`` the simulated ones)."""
+        return self.trained_references != self.references
+
+    def trained_designs(self, req: Requirement) -> list[Design]:
+        """Designs with a successful trained evaluation for ``req``'s task."""
+        return sorted({Design.from_dict(r["design"]) for r in self.results.values()
+                       if r["task"] == req.task and r["evaluator"] == "trained" and r["status"] == "ok"})
+
+    def disagreements(self, req: Requirement) -> list[dict]:
+        """Real against simulated trained metrics of the same designs (real backend only).
+
+        ``disagree`` is True where their 95 % intervals do not overlap.
+        """
+        rows = []
+        for d in self.trained_designs(req):
+            real, sim = self.trained_value(req, d), self.result("trained_sim", req, d)
+            if real is None or sim is None or sim["status"] != "ok":
+                continue
+            rows.append({"requirement": req.name, "design": d.key(), "real": real["value"], "real_lo": real["lo"],
+                         "real_hi": real["hi"], "sim": sim["value"], "sim_lo": sim["lo"], "sim_hi": sim["hi"],
+                         "disagree": bool(real["hi"] < sim["lo"] or sim["hi"] < real["lo"])})
+        return rows
+
     def bound_meets(self, req: Requirement, d: Design) -> bool:
         """Does the design's bound meet the requirement (optimistic side of its interval)?"""
         r = self.result("bound", req, d)

@@ -167,9 +167,10 @@ def summarize(search: DesignSearch) -> dict:
     failures = [{"key": r["key"], "evaluator": r["evaluator"], "task": r["task"],
                  "design": Design.from_dict(r["design"]).key(), "reason": r["reason"]}
                 for r in search.results.values() if r["status"] == "failed"]
+    disagreements = [row for req in search.requirements for row in search.disagreements(req)]
     unreachable = sorted({f"{Design.from_dict(r['design']).key()}: {r['reason']}"
                           for r in search.results.values() if r["status"] == "unreachable"})
-    return {"requirements": rows, "cheapest": cheapest, "unreachable": unreachable,
+    return {"requirements": rows, "cheapest": cheapest, "unreachable": unreachable, "disagreements": disagreements,
             "reference_bin_ps": search.space.sensor.bin_width_ps, "pareto": pareto, "curves": curves,
             "evaluators": _evaluators(search), "gap": gaps, "failures": failures,
             "optimize": [{k: v for k, v in r.items() if k != "design"} | {"design": r.get("design")}
