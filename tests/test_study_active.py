@@ -33,10 +33,10 @@ def test_json_contract_and_curves(small):
         lo, hi = s["interval"]
         if s["captures_to_target"] is not None:
             assert lo <= s["captures_to_target"] <= hi and s["captures_to_target"] % 5 == 0
-        assert [t["target_rmse_m"] for t in s["targets"]] == [0.04, 0.05, 0.3]
+        assert [t["target_rmse_m"] for t in s["targets"]] == [0.03, 0.04, 0.3]
         reached = [t["captures_to_target"] for t in s["targets"] if t["captures_to_target"] is not None]
         assert reached == sorted(reached, reverse=True)  # a looser target is never reached later
-    assert set(res["ratio_best_to_raster"]) == {"0.04", "0.05", "0.3"}
+    assert set(res["ratio_best_to_raster"]) == {"0.03", "0.04", "0.3"}
     assert len(res["runs"]) == 6 and res["candidates"] == 25
     for r in res["runs"]:
         caps = [row["captures"] for row in r["curve"]]
@@ -55,13 +55,14 @@ def test_to_target_and_summary_intervals():
              {"captures": 10, "gantry_seconds": 22.0, "rmse_m": 0.02, "calibration_error": 0.5}]
     assert to_target(curve, "rmse_m", 0.03) == (10, 22.0)
     assert to_target(curve, "rmse_m", 0.01) == (None, None)
-    study = ActiveStudy(strategies=("raster",), seeds=(0, 1), target_rmse_m=0.03)
+    study = ActiveStudy(strategies=("raster",), seeds=(0, 1), target_rmse_m=0.05)
     never = [dict(row, rmse_m=1.0) for row in curve]
     s = summarise([{"strategy": "raster", "curve": curve, "seconds": 1.0},
                    {"strategy": "raster", "curve": never, "seconds": 1.0}], study)[0]
     assert s["captures_to_target"] is None and s["interval"] == [10.0, None] and s["seeds_reached"] == 1
+    assert study.more_targets_m == (0.03, 0.04)
     assert s["calibration"]["captures_to_target"] == 10.0
-    assert [t["captures_to_target"] for t in s["targets"]] == [None, None, None]  # 0.03, 0.04, 0.05
+    assert [t["captures_to_target"] for t in s["targets"]] == [None, None, None]  # 0.03, 0.04 and the 0.05 target
     assert s["targets"][0]["interval"] == [10.0, None]
     with pytest.raises(UserError, match="more_targets_m must all be > 0"):
         ActiveStudy(more_targets_m=(0.0,))
