@@ -44,6 +44,15 @@ def _requirement(text: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _cluster(text: str) -> str:
+    """``tcp://HOST:PORT`` or ``local:N`` (checked before any work starts)."""
+    if text.startswith("tcp://") and ":" in text[6:]:
+        return text
+    if text.startswith("local:") and text[6:].isdigit() and int(text[6:]) >= 1:
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r}: give tcp://HOST:PORT (a running Dask scheduler) or local:N (N >= 1)")
+
+
 def build_config(args):
     """The :class:`DesignConfig` of the parsed options."""
     from dataclasses import replace
@@ -129,7 +138,7 @@ def add(sub) -> None:
     runner = p.add_argument_group("where evaluations run")
     runner.add_argument("--workers", type=int_type(1, 256), default=None,
                         help="local worker processes (default: the CPU count)")
-    runner.add_argument("--cluster", metavar="ADDR",
+    runner.add_argument("--cluster", metavar="ADDR", type=_cluster,
                         help="a Dask cluster: tcp://HOST:PORT (workers must see OUT) or local:N to start one here")
     real = p.add_argument_group("real captures (optional)")
     real.add_argument("--real", metavar="STORE", help="capture store (SQLite) whose captures the trained evaluator "
