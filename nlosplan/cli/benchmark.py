@@ -7,9 +7,8 @@ import time
 from contextlib import contextmanager
 
 from nlosplan.cli.common import emit, names_type, note, number_type, parse_where, progress_bar, sub_parser
-from nlosplan.tasks.benchmark import DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL
-from nlosplan.tasks.models import MODEL_NAMES, TASKS
-from nlosplan.tasks.splits import SPLITS
+from nlosplan.tasks.names import (DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, MODEL_NAMES, PROFILES, SMALL,
+                                  SPLITS, TASKS)
 
 DEFAULT_OUT = "nlosplan-out/benchmark"
 

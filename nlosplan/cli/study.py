@@ -13,9 +13,7 @@ from nlosplan.cli.benchmark import add_training_options, training_options
 from nlosplan.cli.common import command_group, emit, names_type, note, number_type, parse_where, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
-from nlosplan.tasks.benchmark import DEFAULT_EPOCHS
-from nlosplan.tasks.models import MODEL_NAMES, TASKS
-from nlosplan.tasks.splits import SPLITS
+from nlosplan.tasks.names import DEFAULT_EPOCHS, MODEL_NAMES, SPLITS, TASKS
 
 DEFAULT_OUT = "nlosplan-out/jitter"
 #: torch threads: the one-zone models are tiny; on a shared 2-core VM, 2 threads took 264 s where 1 took 7 s.

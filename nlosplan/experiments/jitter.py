@@ -40,10 +40,8 @@ from typing import Callable
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.tasks.benchmark import DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL, run_benchmark
 from nlosplan.tasks.dataset import Dataset, scene_keys
-from nlosplan.tasks.models import MODEL_NAMES, TASKS, check_names
-from nlosplan.tasks.splits import SPLITS
+from nlosplan.tasks.names import DEFAULT_PATIENCE, DEFAULT_WIDTH, MODEL_NAMES, PROFILES, SMALL, SPLITS, TASKS, check_names
 
 __all__ = ["DEFAULT_JITTER_PS", "DEFAULT_MODELS", "STUDY_ZONES", "ZONE_VIEWS", "JitterStudy", "level_summary",
            "load_study_dataset", "run_jitter_study"]
@@ -317,6 +315,8 @@ def run_jitter_study(dataset: Dataset, config: JitterStudy | None = None,
         jitter_seconds = time.perf_counter() - t_level
         summary = level_summary(blurred)
         say({"event": "level", **tag, "summary": summary, "dataset": blurred})
+        from nlosplan.tasks.benchmark import run_benchmark  # torch: only when a study runs
+
         res = run_benchmark(blurred, models=config.models, tasks=config.tasks, split=config.split, seed=config.seed,
                             epochs=config.epochs, width=config.width, average_repeats=config.average_repeats,
                             profile=config.profile, patience=config.patience, max_seconds=config.max_seconds,

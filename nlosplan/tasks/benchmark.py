@@ -37,13 +37,9 @@ from nlosplan.tasks.training import TrainConfig, save_checkpoint, train_model
 __all__ = ["DENALI_CELLS", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE", "DEFAULT_WIDTH", "PROFILES", "SMALL", "denali_config",
            "run_benchmark", "train_config"]
 
-PROFILES = ("cpu", "denali")
-#: Default epoch cap, early-stopping patience and width (see the measured timings in the module notes).
-DEFAULT_EPOCHS = 30
-DEFAULT_PATIENCE = 5
-DEFAULT_WIDTH = 0.25
-#: Settings of the "small" run CI can afford (a few minutes on 2 CPU cores at DENALI's size).
-SMALL = {"epochs": 5, "width": 0.125}
+from nlosplan.tasks.names import (  # noqa: E402,F401 (re-exported)
+    DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL,
+)
 
 
 #: DENALI's per-entry training settings (``benchmark/main_table/cells.py``):

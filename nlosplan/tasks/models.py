@@ -38,21 +38,7 @@ from nlosplan.errors import UserError
 __all__ = ["MODEL_NAMES", "TASKS", "TASK_LABEL", "ModelSpec", "build_model", "check_names", "model_from_spec",
            "n_parameters"]
 
-#: Model names, in the order of the paper's table.
-MODEL_NAMES: tuple[str, ...] = ("mlp", "cnn1d", "cnn3d", "transformer")
-#: Task names: localization, 30-way shape classification, 2-way size classification.
-TASKS: tuple[str, ...] = ("loc", "shape", "size")
-#: Label column each classification task predicts.
-TASK_LABEL = {"shape": "object", "size": "size"}
-
-
-def check_names(kind: str, given, allowed) -> list[str]:
-    """``given`` (a name or names) checked against ``allowed``, duplicates dropped; a UserError names the bad ones."""
-    given = [given] if isinstance(given, str) else list(given)
-    bad = [g for g in given if g not in allowed]
-    if bad or not given:
-        raise UserError(f"unknown {kind} {', '.join(map(repr, bad)) or '(none given)'}; allowed: {', '.join(allowed)}")
-    return list(dict.fromkeys(given))
+from nlosplan.tasks.names import MODEL_NAMES, TASK_LABEL, TASKS, check_names  # noqa: E402,F401 (re-exported)
 
 
 def _scaled(n: int, width: float, minimum: int = 4) -> int:

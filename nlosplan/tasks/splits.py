@@ -27,13 +27,12 @@ from sklearn.model_selection import train_test_split
 
 from nlosplan.errors import UserError
 from nlosplan.tasks.dataset import Dataset, scene_keys
-from nlosplan.tasks.models import TASK_LABEL, TASKS
+from nlosplan.tasks.names import SPLITS, TASK_LABEL, TASKS  # noqa: F401 (SPLITS re-exported)
 
 __all__ = ["SPLITS", "Split", "heldout_objects", "heldout_positions", "heldout_sizes", "make_split",
            "random_split", "split_applies", "stratified_split", "task_random_split"]
 
 #: Split kinds accepted by :func:`make_split` (``sizes:8in`` trains on 8 in).
-SPLITS: tuple[str, ...] = ("random", "positions", "objects", "sizes", "sizes:4in", "sizes:8in")
 
 
 @dataclass(frozen=True)
