@@ -128,7 +128,14 @@ def _headline(summary: dict, ref_bin_ps: float) -> str:
             parts.append(f"**{c['requirement']}**: met by {_design_text(c['design'], ref_bin_ps)} "
                          f"({_fmt_metric(c['task'], c['value'])}, cost {c['cost']:.2f})")
         else:
-            parts.append(f"**{c['requirement']}**: no design in the space meets it with the trained models")
+            text = f"**{c['requirement']}**: no design in the space meets it with the trained models"
+            if c.get("best_trained") is not None:
+                text += f" (best {_fmt_metric(c['task'], c['best_trained'])}"
+                if c.get("bound_meets"):
+                    text += (f"; the bound reaches {_fmt_metric(c['task'], c['best_bound'])}: the model, not the "
+                             "sensor, is what limits it")
+                text += ")"
+            parts.append(text)
     return "; ".join(parts) + "."
 
 

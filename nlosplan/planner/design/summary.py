@@ -119,8 +119,13 @@ def _cheapest(search: DesignSearch, req: Requirement, trained: list[dict]) -> di
         return {"requirement": req.name, "task": req.task, **{**p, "design": p["design"].to_dict()},
                 "source": "scans (the optimized candidates did not verify)" if search.candidates.get(req.name)
                 else "scans", "margin": req.margin(p["value"])}
+    best = max(trained, key=lambda p: -p["value"] if req.smaller_is_better else p["value"], default=None)
+    bounds = [r["value"] for r in search.results.values() if r["task"] == req.task and r["evaluator"] == "bound"
+              and r["status"] == "ok" and math.isfinite(r["value"])]
+    best_bound = (min(bounds) if req.smaller_is_better else max(bounds)) if bounds else None
     return {"requirement": req.name, "task": req.task, "design": None, "key": None, "cost": None, "value": None,
-            "source": "none", "margin": None}
+            "source": "none", "margin": None, "best_trained": None if best is None else best["value"],
+            "best_bound": best_bound, "bound_meets": best_bound is not None and req.met(best_bound)}
 
 
 def _curves(search: DesignSearch, req: Requirement) -> list[dict]:
