@@ -147,10 +147,10 @@ do not help these small models and can be far slower on a busy machine
 
 
 def add(sub) -> None:
-    """The ``study`` subcommand with ``jitter``."""
-    ssub = command_group(sub, "study", "declarative studies over the benchmark (jitter)",
+    """The ``study`` subcommand: ``jitter`` here, then the modules of :data:`MORE_STUDIES`."""
+    ssub = command_group(sub, "study", "declarative studies (jitter, resolution, bins, active-vs-raster)",
                          "Declarative studies: a small configuration of what to vary, run through the benchmark models, "
-                         "written as tables, JSON and a figure.",
+                         "the design planner or the capture planner, written as tables, JSON and a figure.",
                          metavar="STUDY")
     p = sub_parser(ssub, "jitter", "study jitter",
                    "DENALI's timing-jitter study: centre zone, Gaussian jitter at training and test, three tasks",

@@ -215,8 +215,8 @@ class EmulatedGrbl(PtyDevice):
                     if was_moving:
                         self._say("ALARM:3")
                     self._greet()
-                elif b == 0x85:
-                    pass
+                elif b == 0x85:  # jog cancel: the emulator runs no $J jogs, so there is nothing to cancel
+                    continue
                 elif ch in (b"\n", b"\r"):
                     if self._line:
                         line = self._line.decode("ascii", errors="replace").strip()

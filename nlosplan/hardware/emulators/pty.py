@@ -12,6 +12,7 @@ can bring the device back on a new pty under the same name.
 
 from __future__ import annotations
 
+import abc
 import errno
 import os
 import select
@@ -24,7 +25,7 @@ from pathlib import Path
 __all__ = ["PtyDevice"]
 
 
-class PtyDevice:
+class PtyDevice(abc.ABC):
     """Base class of the pty emulators: subclasses implement :meth:`on_bytes` and :meth:`tick`.
 
     Parameters
@@ -89,9 +90,9 @@ class PtyDevice:
         threading.Thread(target=back, name=f"{self.name}-replug", daemon=True).start()
 
     # ------------------------------------------------------------------ hooks
+    @abc.abstractmethod
     def on_bytes(self, data: bytes) -> None:
-        """Bytes the driver wrote."""
-        raise NotImplementedError
+        """Bytes the driver wrote (every emulator speaks its own protocol here)."""
 
     def tick(self, now: float) -> None:
         """Called every ``tick_s`` seconds with ``time.monotonic()``."""

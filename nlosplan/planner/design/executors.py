@@ -41,7 +41,7 @@ class SerialExecutor:
                 yield job, _failed(job, exc)
 
     def close(self) -> None:
-        pass
+        """Nothing to release: jobs ran in this process."""
 
 
 def _init_worker() -> None:  # one thread per worker: the pool provides the parallelism

@@ -21,7 +21,7 @@ import numpy as np
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.requirements import Requirement
-from nlosplan.planner.design.search import _transform, _untransform
+from nlosplan.planner.design.search import metric_to_score, score_to_metric
 from nlosplan.planner.design.space import Design, DesignSpace
 
 __all__ = ["optimize_jobs", "optimize_choice", "collect_candidates"]
@@ -85,7 +85,7 @@ def optimize_choice(job: dict) -> dict:
             if r["status"] != "ok" or not math.isfinite(r["value"]):
                 memo[d] = (-1.0, math.nan)
             else:
-                pred = _untransform(req, _transform(req, r["value"]) + job["gap"])
+                pred = score_to_metric(req, metric_to_score(req, r["value"]) + job["gap"])
                 memo[d] = (req.margin(pred), r["value"])
         return memo[d]
 
@@ -118,7 +118,7 @@ def optimize_choice(job: dict) -> dict:
         out["reason"] = f"COBYLA stopped early ({type(exc).__name__})"
     d = _design(best["u"], base, space)
     m, b = margin(best["u"])
-    pred = _untransform(req, _transform(req, b) + job["gap"])
+    pred = score_to_metric(req, metric_to_score(req, b) + job["gap"])
     out.update(design=d.to_dict(), cost=best["cost"], predicted=pred, bound=b, status="feasible",
                evaluations=len(memo), seconds=time.perf_counter() - t0)
     return out

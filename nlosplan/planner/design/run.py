@@ -33,7 +33,7 @@ from nlosplan.planner.design.search import DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
 
-__all__ = ["DesignConfig", "run_design", "CHECKPOINT", "EVALUATIONS"]
+__all__ = ["DesignConfig", "run_design", "read_evaluations", "CHECKPOINT", "EVALUATIONS"]
 
 CHECKPOINT = "design_checkpoint.json"
 EVALUATIONS = "design_evaluations.jsonl"
@@ -107,6 +107,19 @@ def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
             "cpus": os.cpu_count()}
 
 
+def read_evaluations(path) -> list[dict]:
+    """The results in a ``design_evaluations.jsonl`` log, in order; a torn line (a killed run) is skipped."""
+    path = Path(path)
+    out = []
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:  # the line being written when the run was killed
+                continue
+    return out
+
+
 class _Checkpoint:
     """``design_checkpoint.json`` (configuration, candidates) + ``design_evaluations.jsonl`` (one result per line).
 
@@ -128,12 +141,7 @@ class _Checkpoint:
                 raise UserError(f"{path} is from a run with another configuration; use another --out, "
                                 "or run without --resume to start over (the old checkpoint is kept as .bak)")
             self.data = old
-            if self.log.exists():
-                for line in self.log.read_text().splitlines():
-                    try:
-                        self.results.append(json.loads(line))
-                    except json.JSONDecodeError:  # the line being written when the run was killed
-                        continue
+            self.results = read_evaluations(self.log)
         else:
             for old in (path, self.log):
                 if old.exists():
@@ -182,7 +190,7 @@ def _references(cfg: DesignConfig, out: Path, say) -> tuple[dict, dict, dict]:
         ref = load_reference(path)
         sims[f"{z[0]}x{z[1]}"] = path
         info[f"{z[0]}x{z[1]}"] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
-                                   "seconds": ref.seconds, "source": "fast simulator", "fidelity": scenes.fidelity}
+                                   "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
     if cfg.real:
         from nlosplan.experiments.jitter import load_study_dataset
         from nlosplan.planner.design.space import _load_reference

@@ -34,7 +34,8 @@ from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY, job_key
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
 
-__all__ = ["SearchConfig", "DesignSearch", "axis_grid", "CONTINUOUS", "MORE_IS_BETTER"]
+__all__ = ["SearchConfig", "DesignSearch", "axis_grid", "CONTINUOUS", "MORE_IS_BETTER", "metric_to_score",
+           "score_to_metric"]
 
 CONTINUOUS = ("jitter_fwhm_ps", "pulse_fwhm_ps", "photon_fraction")
 #: Axes along which a larger value is more (better, costlier) hardware.
@@ -336,7 +337,7 @@ class DesignSearch:
             b, t = self.result("bound", req, d), self.trained_value(req, d)
             if b is None or t is None or b["status"] != "ok" or not math.isfinite(b["value"]):
                 continue
-            diffs.append(_transform(req, t["value"]) - _transform(req, b["value"]))
+            diffs.append(metric_to_score(req, t["value"]) - metric_to_score(req, b["value"]))
         if not diffs:
             return {"value": 0.0, "n": 0, "spread": math.nan}
         q1, med, q3 = np.percentile(diffs, [25, 50, 75])
@@ -344,7 +345,7 @@ class DesignSearch:
 
     def predict(self, req: Requirement, bound_value: float) -> float:
         """The trained metric predicted from a bound value and the measured gap."""
-        return _untransform(req, _transform(req, bound_value) + self.gap(req)["value"])
+        return score_to_metric(req, metric_to_score(req, bound_value) + self.gap(req)["value"])
 
     def set_candidates(self, candidates: dict[str, list[dict]], log: list[dict]) -> None:
         """Candidates per requirement name from the optimize stage (see :func:`optimize.run_optimize`)."""
@@ -353,14 +354,16 @@ class DesignSearch:
         self._optimized = True
 
 
-def _transform(req: Requirement, v: float) -> float:
+def metric_to_score(req: Requirement, v: float) -> float:
+    """The scale the gap and interpolation work on: log RMSE, or logit accuracy (clipped to [0.001, 0.999])."""
     if req.smaller_is_better:
         return math.log(max(v, 1e-9))
     p = min(max(v, 1e-3), 1 - 1e-3)
     return math.log(p / (1 - p))
 
 
-def _untransform(req: Requirement, z: float) -> float:
+def score_to_metric(req: Requirement, z: float) -> float:
+    """Inverse of :func:`metric_to_score`."""
     if req.smaller_is_better:
         return math.exp(z)
     return 1.0 / (1.0 + math.exp(-z))

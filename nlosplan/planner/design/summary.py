@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from nlosplan.planner.design.requirements import Requirement
-from nlosplan.planner.design.search import CONTINUOUS, MORE_IS_BETTER, DesignSearch, _transform
+from nlosplan.planner.design.search import CONTINUOUS, MORE_IS_BETTER, DesignSearch, metric_to_score
 from nlosplan.planner.design.space import AXES, Design
 
 __all__ = ["summarize", "requirement_row", "pareto_front"]
@@ -33,7 +33,7 @@ def _crossing(req: Requirement, xs, vals, axis: str, discrete: bool):
             continue
         if discrete or i == 0 or vals[i - 1] is None or not math.isfinite(vals[i - 1]):
             return xs[i]
-        t0, t1, tt = _transform(req, vals[i - 1]), _transform(req, vals[i]), _transform(req, req.threshold)
+        t0, t1, tt = metric_to_score(req, vals[i - 1]), metric_to_score(req, vals[i]), metric_to_score(req, req.threshold)
         if t1 == t0:
             return xs[i]
         frac = min(max((tt - t0) / (t1 - t0), 0.0), 1.0)

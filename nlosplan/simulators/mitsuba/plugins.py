@@ -128,10 +128,10 @@ def register(mi) -> None:
             return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
         def traverse(self, callback):
-            pass
+            """No differentiable parameters are exposed (the lobe is fixed per scene)."""
 
         def parameters_changed(self, keys):
-            pass
+            """Nothing is cached from parameters, so nothing to update."""
 
         def to_string(self):
             return f"NlosplanRetro[albedo={self.albedo}, kappa={self.kappa}]"
