@@ -96,13 +96,14 @@ def test_coupling_case_fails_when_the_exact_kernel_is_wrong(monkeypatch):
 
 def test_near_wall_case_fails_without_the_exact_form_factor(monkeypatch, fresh_cache):
     """With the midpoint kernel everywhere (no near-field cells) the in-view return grows ~4x from 5 to 2 mm
-    and the out-of-view one falls as h^4 (the wall under the patch no longer lights it with a bounded pi L)."""
+    and an out-of-view one falls as h^4 (the wall under the patch no longer lights it with a bounded pi L;
+    which lateral offset shows it first depends on how finely the flash cells tile the wall there)."""
     monkeypatch.setattr(plan_object, "NEAR_CELLS", 0.0)
     passed, detail = sc._near_wall("lambertian")()
     assert not passed
     by_x = {part.split(":")[0]: part for part in detail.split("mm: ", 1)[1].split("; ") if part.startswith("x=")}
     assert "FAIL" in by_x["x=0 m (in view)"], detail
-    assert "FAIL" in by_x["x=0.45 m"], detail
+    assert any("FAIL" in part for x, part in by_x.items() if x != "x=0 m (in view)"), detail
 
 
 def test_gradient_case_fails_on_nan(monkeypatch, fresh_cache):

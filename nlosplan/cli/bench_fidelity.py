@@ -8,11 +8,11 @@ from nlosplan.cli.common import emit, int_type, note, progress_bar
 
 FIDELITY_DESCRIPTION = """\
 Error against run time of both simulators on DENALI 3x3 (Lambertian objects
-A_8in at position 19 and circle_4in at 73): every fidelity level of the fast
-backend and of the Mitsuba twin, seconds per scene and the relative L1 error of
-the three-bounce histogram against a converged twin reference (its own error
-is measured from two independent halves and printed), and the speed-up of the
-fast backend over the twin at equal error. Takes a few minutes on 2 cores.
+A_8in at position 19, circle_4in at 73, 3_4in at 47, minus_8in at 99): every
+fidelity level of the fast backend and of the Mitsuba twin, seconds per scene
+and the relative L1 error of the three-bounce histogram against a converged
+twin reference (its own error is measured from two independent halves and
+printed), and the speed-up of the fast backend over the twin at equal error. About 2 minutes on 2 cores.
 JSON: {"rows": [{"backend", "fidelity", "seconds", "rel_l1_error"}...],
 "speedup_at_equal_error": number, "speedups", "reference", "config"}."""
 
@@ -20,15 +20,15 @@ CROSSVAL_DESCRIPTION = """\
 Cross-validation of the twin against the fast backend on the DENALI rig with
 Lambertian objects: every object x size x position, normalized relative L1 of
 the background-subtracted three-bounce histogram (target <= 5 %) and centroid
-shift (target <= 0.5 bin, zones with >= 5 % of the signal). About 4 minutes
+shift (target <= 0.5 bin, zones with >= 5 % of the signal). About 2 minutes
 for the default 60 cases on 2 cores. JSON: {"cases": [...], "summary": {...}}."""
 
 
 def _cmd_fidelity(args) -> int:
-    from nlosplan.simulators.mitsuba.bench import bench_fidelity, format_bench_fidelity
+    from nlosplan.simulators.mitsuba.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
 
     note(args, "bench fidelity: reference twin, then every level of both backends ...")
-    with progress_bar(args, 1 + 8, "bench fidelity", "step") as bar:
+    with progress_bar(args, 1 + len(FAST_LEVELS) + len(TWIN_LEVELS), "bench fidelity", "step") as bar:
         def progress(text):
             if bar is not None:
                 bar.set_postfix_str(text[:60])
