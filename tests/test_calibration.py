@@ -117,3 +117,58 @@ def test_bad_starts_are_rejected_or_detected(simulated):
     # a time offset 25 bins off, fitting the scale alone: the peaks cannot match and the fit says so
     with pytest.raises(UserError, match="did not lock onto the measured peaks .* start is probably too far off"):
         fit_calibration(simulated, steps=["scale"], start={"start_offset_ps": 1000.0})
+
+
+def _jittered_captures(offset_sd_ps, seed=1):
+    """Like :func:`_captures`, but each capture's time base is off by a random offset the model does not know."""
+    s = _sensor()
+    rng = np.random.default_rng(seed)
+    counts, times, weights = [], [], []
+    for d in DISTANCES:
+        t, w = wall_arrivals(WallScene(distance_m=float(d), albedo=1.0), s)
+        t, w = t.reshape(9, -1)[[4]], w.reshape(9, -1)[[4]]
+        mu = np.asarray(expected_histogram(s, t + rng.normal(0.0, offset_sd_ps), w, lights_on=False))
+        counts.append(rng.poisson(mu))
+        times.append(t)
+        weights.append(w)
+    return CaptureSet(np.array(counts, dtype=np.float64), np.array(times), np.array(weights), ITERS,
+                      tuple(f"{d:.2f} m" for d in DISTANCES))
+
+
+def test_bootstrap_agrees_with_fisher_when_the_model_is_right(simulated, recovered):
+    from nlosplan.sensor_models.calibration import bootstrap_errors
+
+    seen = []
+    b = bootstrap_errors(simulated, recovered, resamples=10, seed=3, progress=lambda i, n: seen.append((i, n)))
+    assert seen[-1] == (10, 10) and b.resamples == 10
+    assert set(b.errors) == set(recovered.fitted)
+    for name in ("photon_scale", "bin_width_ps", "start_offset_ps", "pulse_fwhm_ps"):
+        ratio = b.errors[name] / recovered.errors[name]
+        assert 0.3 < ratio < 3.0, (name, ratio)  # resampling 12 captures: the same size as the Fisher error
+        lo, hi = b.intervals[name]
+        assert lo < recovered.values[name] < hi
+    assert b.to_dict()["intervals"]["bin_width_ps"][0] == b.intervals["bin_width_ps"][0]
+
+
+def test_bootstrap_sees_what_fisher_cannot_a_time_base_wandering_between_captures():
+    from nlosplan.sensor_models.calibration import bootstrap_errors
+
+    cs = _jittered_captures(offset_sd_ps=6.0)
+    start = {"bin_width_ps": 94.0, "start_offset_ps": -1100.0, "pulse_fwhm_ps": 150.0}
+    fit = fit_calibration(cs, start=start, noise="global")
+    b = bootstrap_errors(cs, fit, resamples=10, seed=0)
+    # photon counting alone pins the offset to well under a picosecond; the captures scatter by 6 ps, and the
+    # offset (at t = 0) is extrapolated from returns at 0.5-2.7 ns: ~6 ps x 0.76 (regression intercept) ~ 4.5 ps
+    assert fit.errors["start_offset_ps"] < 0.5
+    assert b.errors["start_offset_ps"] > 4 * fit.errors["start_offset_ps"]
+    assert 1.0 < b.errors["start_offset_ps"] < 20.0
+
+
+def test_bootstrap_refuses_too_few_resamples_or_captures(simulated, recovered):
+    from nlosplan.sensor_models.calibration import bootstrap_errors
+
+    with pytest.raises(UserError, match="at least 5"):
+        bootstrap_errors(simulated, recovered, resamples=3)
+    one = fit_calibration(simulated.subset([5]), start={"bin_width_ps": 91.0, "start_offset_ps": -1150.0})
+    with pytest.raises(UserError, match="at least 2 captures"):
+        bootstrap_errors(simulated.subset([5]), one, resamples=5)

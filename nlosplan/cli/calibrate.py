@@ -4,21 +4,43 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-from nlosplan.cli.common import emit, note
+from nlosplan.cli.common import emit, int_type, note, progress_bar
 from nlosplan.errors import UserError
 
 EXAMPLES = (
     "nlosplan calibrate ../shared/data/tmf882x_distance/distance_data_even.json --holdout 0.5 "
     "--out out/calibrated.toml --plot out/calibration.png",
     "nlosplan calibrate captures.json --steps scale,pulse --pulse gaussian --start bin_width_ps=95 --json",
+    "nlosplan calibrate denali-data/data --where zones=3x3,lights=off --holdout 0.3 --out out/denali3x3.toml",
+    "nlosplan calibrate out/denali.sqlite --where 'zones=8x8,object=NOOBJECT|A' --sensor tmf8828-8x8-short --json",
 )
 
 DESCRIPTION = """\
-Calibrate the sensor model against real histograms of known geometry: a flat
-plane square-on at known distances (JSON entries with dist_to_plane, hists
-(zones x bins) and reference_hist, as ../shared/data/tmf882x_distance). Each
-capture's matching simulated scene is the plane at its distance.
+Calibrate the sensor model against real histograms of known geometry. CAPTURES
+is one of:
+
+  a JSON file     a flat plane square-on at known distances (entries with
+                  dist_to_plane, hists (zones x bins) and reference_hist, as
+                  ../shared/data/tmf882x_distance); each capture's matching
+                  simulated scene is the plane at its distance.
+  a DENALI folder the folder holding <object>_<4inch|8inch>_<3x3|8x8>_
+                  <lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy
+                  (repeats x H x W x 128, NNN the gantry position); each
+                  capture's matching scene is the DENALI rig (relay wall,
+                  tables) with its object at its position (NOOBJECT: none,
+                  NOOBJECTMOUNT: the bare mount): first-bounce wall returns
+                  plus the object's three-bounce light (fast simulator).
+  a capture store a .sqlite file of 'nlosplan dataset import-denali' (or
+                  'dataset build'): the same, from the store.
+
+DENALI folders and stores take --where filters (e.g. zones=3x3,lights=off;
+one zone mode at a time), fit every zone that sees the relay wall by default,
+use the captures' stored sensor unless --sensor is given, hold out whole
+gantry positions, and measure each zone's floor on the bins no simulated light
+reaches, over the captures of one folder (the object's return may fall in the
+last bins).
 
 Fitted with nlopt (BOBYQA) on normalized, bounded variables by Poisson maximum
 likelihood: global photon scale, pulse width (a Gaussian broadening a
@@ -28,10 +50,12 @@ that stack: scale (global scaling), pulse (pulse-width and time-base
 matching), noise (noise matching); a joint pass refines them together.
 Uncertainties: Fisher information (statistical only; unidentifiable parameters
 are flagged). Saturated zones and zones without signal are left out with a
-message. With --holdout F a seeded part (1-F) is kept out of the fit and
-scored: peak-bin error and the normalized L1 of the histogram shape.
-Writes the calibrated sensor file (--out, .toml or .json: usable as --sensor
-by every other command) and a residual plot (--plot). About 20 s."""
+message. With --holdout F a seeded part F is kept out of the fit (captures, or
+gantry positions for DENALI) and scored: peak-bin error, the normalized L1 of
+the histogram shape and the amplitude ratio. Writes the calibrated sensor file
+(--out, .toml or .json: usable as --sensor by every other command) and a
+residual plot (--plot). About 20 s on the plane JSON; a DENALI folder of 10
+positions x 2 repeats takes 20-30 s (the three-bounce simulation and the fit)."""
 
 
 def _parse_start(text: str | None) -> dict:
@@ -59,7 +83,56 @@ def _zones(text: str, n: int) -> list[int]:
     return zones
 
 
+def _steps(text: str) -> list[str]:
+    return [s.strip() for s in text.split(",") if s.strip()]
+
+
+def _bootstrap(args, cs_fit, fit, noise):
+    """Bootstrap errors of ``fit`` on its own captures when --bootstrap asks for them (None otherwise)."""
+    if not args.bootstrap:
+        return None
+    from nlosplan.sensor_models.calibration import bootstrap_errors
+
+    note(args, f"bootstrap: refitting on {args.bootstrap} resamples of {len(cs_fit.labels)} captures ...")
+    with progress_bar(args, args.bootstrap, "bootstrap", "refit") as bar:
+        return bootstrap_errors(cs_fit, fit, resamples=args.bootstrap, seed=args.seed, noise=noise,
+                                progress=None if bar is None else (lambda done, total: bar.update(1)))
+
+
+def _parameter_lines(fit, boot) -> list[str]:
+    """One line per fitted parameter: value, Fisher error and (with --bootstrap) the bootstrap spread."""
+    lines = []
+    for name in fit.fitted:
+        err = fit.errors.get(name)
+        shown = "unidentifiable" if err is None else f"+- {err:.3g}"
+        if boot is not None:
+            lo, hi = boot.intervals[name]
+            shown += f" (Fisher); bootstrap +- {boot.errors[name]:.3g}, 95 % [{lo:.6g}, {hi:.6g}]"
+        lines.append(f"  {name:16s} {fit.values[name]:.6g} {shown}")
+    lines.append(f"  mean Poisson deviance per bin {fit.deviance:.4g} on {int(fit.used.sum())} capture zones")
+    if boot is not None:
+        lines.append(f"  bootstrap: {boot.resamples} refits on captures resampled with replacement (seed {boot.seed})")
+    return lines
+
+
 def _cmd_calibrate(args) -> int:
+    from nlosplan.sensor_models.calibration.denali import is_capture_store
+
+    from nlosplan.sensor_models.calibration.bootstrap import MIN_RESAMPLES
+
+    t0 = time.perf_counter()
+    if 0 < args.bootstrap < MIN_RESAMPLES:  # before the fit, not after it
+        raise UserError(f"bootstrap resamples {args.bootstrap} < {MIN_RESAMPLES}: give at least {MIN_RESAMPLES} "
+                        "(30 or more for a 95 % interval)")
+    if Path(args.captures).is_dir() or is_capture_store(args.captures):
+        return _calibrate_denali(args, t0)
+    for flag, value in (("--where", args.where), ("--fidelity", args.fidelity), ("--trust-pickle", args.trust_pickle)):
+        if value not in (None, False):
+            raise UserError(f"{flag} applies to a DENALI folder or a capture store, not to JSON plane captures")
+    return _calibrate_plane(args, t0)
+
+
+def _calibrate_plane(args, t0: float) -> int:
     import numpy as np
 
     from nlosplan.sensor_models import resolve_sensor
@@ -68,7 +141,11 @@ def _cmd_calibrate(args) -> int:
     from nlosplan.sensor_models.tmf882x_fit import load_distance_captures
     from nlosplan.simulators import WallScene, wall_arrivals
 
-    t0 = time.perf_counter()
+    args.sensor = args.sensor or "tmf8828-3x3-short"
+    args.zones = args.zones or "4"
+    args.pulse = args.pulse or "shape"
+    args.lights = args.lights or "on"
+    args.min_distance = 0.06 if args.min_distance is None else args.min_distance
     base = resolve_sensor(args.sensor)
     captures = load_distance_captures(args.captures)
     n_zones = captures.hists.shape[1]
@@ -76,7 +153,7 @@ def _cmd_calibrate(args) -> int:
         raise UserError(f"the captures have {n_zones} zones but sensor {base.name} has {base.n_zones}; "
                         "give a matching --sensor")
     zones = _zones(args.zones, n_zones)
-    steps = [s.strip() for s in args.steps.split(",") if s.strip()]
+    steps = _steps(args.steps)
     if not 0 <= args.holdout < 1:
         raise UserError(f"--holdout {args.holdout} must be >= 0 and < 1 (the held-out fraction)")
 
@@ -96,6 +173,8 @@ def _cmd_calibrate(args) -> int:
                          np.flatnonzero(captures.distance_m >= args.min_distance))
     floor = float(np.median(cs_all.counts[..., -30:])) if args.noise == "measured" else None
     sensor = calibrated_sensor(base, fit, floor, lights_on=args.lights == "on")
+    fit_idx = np.flatnonzero(captures.distance_m >= args.min_distance) if holdout is None else holdout.fit_indices
+    boot = _bootstrap(args, capture_set(captures, arrivals, zones, base.iterations, fit_idx), fit, args.noise)
     files = {}
     if args.out:
         sensor.save(args.out)
@@ -110,14 +189,11 @@ def _cmd_calibrate(args) -> int:
                                 title=f"{base.name} calibrated on {args.captures}")
         files["plot"] = str(path)
     data = {"sensor": sensor.name, "base": base.name, "fit": fit.to_dict(),
+            "bootstrap": None if boot is None else boot.to_dict(),
             "holdout": None if holdout is None else holdout_dict(holdout), "files": files,
             "seconds": time.perf_counter() - t0}
     lines = [f"calibrated {base.name} on {args.captures} ({', '.join(steps)}; pulse {args.pulse}, noise {args.noise})"]
-    for name in fit.fitted:
-        err = fit.errors.get(name)
-        shown = "unidentifiable" if err is None else f"+- {err:.3g}"
-        lines.append(f"  {name:16s} {fit.values[name]:.6g} {shown}")
-    lines.append(f"  mean Poisson deviance per bin {fit.deviance:.4g} on {int(fit.used.sum())} capture zones")
+    lines += _parameter_lines(fit, boot)
     lines += [f"  note: {m}" for m in fit.messages]
     if holdout is not None:
         lines.append(f"held out {holdout.n_holdout} captures (fit on {holdout.n_fit}, seed {args.seed}): peak-bin error "
@@ -129,32 +205,136 @@ def _cmd_calibrate(args) -> int:
     return 0
 
 
+def _calibrate_denali(args, t0: float) -> int:
+    import numpy as np
+
+    from nlosplan.cli.common import parse_where
+    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.sensor_models.calibration import STEPS, predict
+    from nlosplan.sensor_models.calibration import denali as cal
+
+    for flag, value in (("--lights", args.lights), ("--min-distance", args.min_distance)):
+        if value is not None:
+            raise UserError(f"{flag} applies to JSON plane captures only; DENALI captures carry their lights label "
+                            "and fixed geometry (filter them with --where)")
+    steps = _steps(args.steps)
+    bad = [s for s in steps if s not in STEPS]
+    if bad or not steps:
+        raise UserError(f"unknown calibration step(s) {', '.join(bad) or '(none)'}; allowed: {', '.join(STEPS)}")
+    if not 0 <= args.holdout < 1:
+        raise UserError(f"--holdout {args.holdout} must be >= 0 and < 1 (the held-out fraction)")
+    start = _parse_start(args.start)
+    fidelity = args.fidelity or "default"
+    from nlosplan.simulators.fast.fidelity import resolve_fidelity
+
+    resolve_fidelity(fidelity)
+    caps = cal.load_denali_captures(args.captures, parse_where(args.where), trust_pickle=args.trust_pickle)
+    if args.sensor:
+        base = resolve_sensor(args.sensor)
+    elif caps.sensor is not None:
+        base = caps.sensor
+    else:
+        raise UserError(f"the captures in {args.captures} were stored with several sensors; give --sensor, or "
+                        "filter with --where sensor_hash=...")
+    cal.check_sensor(caps, base)
+    cal.check_noise(caps.labels["lights"], args.noise)
+    zones = _zones(args.zones, base.n_zones) if args.zones else cal.wall_zones(base, fidelity=fidelity)
+    pulse = args.pulse or ("shape" if base.pulse_shape is not None else "gaussian")
+    cal.pulse_model(base, pulse)
+    where = "DENALI folder" if Path(args.captures).is_dir() else "capture store"
+    note(args, f"calibrating {base.name} on {len(caps)} captures of {args.captures} ({where}; {', '.join(steps)}) ...")
+    cs = cal.denali_capture_set(caps, base, zones=zones, fidelity=fidelity)
+    groups = caps.floor_groups()
+    kw = dict(steps=steps, pulse=pulse, noise=args.noise, start=start)
+    holdout = None
+    if args.holdout > 0:
+        fit, holdout = cal.denali_holdout(cs, caps.positions, base, fit_fraction=1 - args.holdout, seed=args.seed,
+                                          groups=groups, **kw)
+    else:
+        fit = cal.fit_denali(cs, base, groups=groups, **kw)
+    sensor = cal.calibrated_denali_sensor(base, fit, cs, caps.labels["lights"], args.noise, groups)
+    fit_idx = (np.arange(len(cs.labels)) if holdout is None
+               else np.flatnonzero(np.isin(caps.positions, holdout.positions_fit)))
+    cs_fit = cs.subset(fit_idx)
+    fit_groups = None if groups is None else np.asarray(groups, dtype=str)[fit_idx]
+    boot = _bootstrap(args, cs_fit, fit, cal.fit_floors(fit, cs_fit, args.noise, fit_groups))
+    files = {}
+    if args.out:
+        sensor.save(args.out)
+        files["sensor"] = str(args.out)
+    if args.plot:
+        from nlosplan.reports.calibration_plot import plot_calibration
+
+        pred = predict(fit, cs, cal.fit_floors(fit, cs, args.noise, groups))
+        path = plot_calibration(cs.counts.reshape(-1, cs.counts.shape[-1]), pred.reshape(-1, pred.shape[-1]),
+                                [f"{lab} z{z}" for lab in cs.labels for z in zones], args.plot,
+                                title=f"{base.name} calibrated on {args.captures}")
+        files["plot"] = str(path)
+    info = {**caps.describe(), "kind": where, "where": parse_where(args.where), "zones_fitted": zones,
+            "pulse": pulse, "noise": args.noise, "fidelity": fidelity}
+    data = {"sensor": sensor.name, "base": base.name, "input": info, "fit": fit.to_dict(),
+            "bootstrap": None if boot is None else boot.to_dict(), "holdout": None if holdout is None else holdout.to_dict(), "files": files,
+            "seconds": time.perf_counter() - t0}
+    lines = [f"calibrated {base.name} on {args.captures} ({where}: {len(caps)} captures at {info['positions']} "
+             f"positions, {', '.join(info['objects'])}, lights {'/'.join(info['lights'])}; zones "
+             f"{','.join(map(str, zones))}; {', '.join(steps)}; pulse {pulse}, noise {args.noise})"]
+    lines += _parameter_lines(fit, boot)
+    lines += [f"  note: {m}" for m in fit.messages]
+    if holdout is not None:
+        h = holdout.scores
+        lines.append(f"held out {len(holdout.positions_holdout)} positions ({holdout.n_holdout} captures, "
+                     f"{len(h.peak_bin_error)} capture zones; fit on {len(holdout.positions_fit)} positions, "
+                     f"{holdout.n_fit} captures, seed {args.seed}): peak-bin error mean |.| "
+                     f"{h.peak_bin_error_mean_abs:.3f}, max {h.peak_bin_error_max_abs} bins; shape L1 mean "
+                     f"{100 * h.shape_l1_mean:.2f} %, max {100 * h.shape_l1_max:.2f} %; amplitude pred/meas median "
+                     f"{h.amplitude_ratio_median:.3f}")
+    lines += [f"wrote {k}: {v}" for k, v in files.items()]
+    emit(args, data, "\n".join(lines))
+    return 0
+
+
 def add(sub) -> None:
     """The ``calibrate`` subcommand."""
     p = sub.add_parser("calibrate", help="fit the sensor model to real captures of known geometry (sim-to-real)",
                        description=DESCRIPTION, epilog="examples:\n" + "\n".join(f"  {e}" for e in EXAMPLES),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("captures", help="JSON captures of a plane at known distances (tmf882x_distance layout)")
-    p.add_argument("--sensor", default="tmf8828-3x3-short", help="sensor to calibrate: preset or file (default: %(default)s)")
+    p.add_argument("captures", help="JSON captures of a plane at known distances (tmf882x_distance layout), a "
+                                    "DENALI-layout folder, or a capture store (.sqlite)")
+    p.add_argument("--sensor", help="sensor to calibrate: preset or file (default: tmf8828-3x3-short for JSON; "
+                                    "the captures' stored sensor for a DENALI folder or a store)")
     p.add_argument("--steps", default="scale,pulse,noise",
                    help="calibration functions in order, from scale, pulse, noise (default: %(default)s)")
-    p.add_argument("--pulse", choices=["shape", "gaussian"], default="shape",
-                   help="non-parametric pulse shape (fitted on the fitting part) broadened by a Gaussian, "
-                        "or a Gaussian alone (default: shape)")
+    p.add_argument("--pulse", choices=["shape", "gaussian"],
+                   help="non-parametric pulse shape broadened by a Gaussian, or a Gaussian alone; the shape is "
+                        "fitted on the fitting part (JSON) or the sensor's measured one (DENALI) (default: shape; "
+                        "DENALI: gaussian when the sensor has no pulse shape)")
     p.add_argument("--noise", choices=["measured", "global"], default="measured",
-                   help="noise floor: each capture's own (median of its last 30 bins) or one fitted level "
-                        "(default: measured)")
-    p.add_argument("--zones", default="4", help="flat zone indices to fit, e.g. 4 (centre of 3x3) or 0,1,2,3,4 "
-                                                "(default: %(default)s)")
-    p.add_argument("--min-distance", type=float, default=0.06,
-                   help="leave out captures closer than this, metres (near field, crosstalk overlap; default: 0.06)")
+                   help="noise floor: each capture zone's own (JSON: median of its last 30 bins; DENALI: mean of "
+                        "the bins no simulated light reaches, per folder) or one fitted level (default: measured)")
+    p.add_argument("--zones", help="flat zone indices to fit, e.g. 4 (centre of 3x3) or 0,1,2,3,4 "
+                                   "(default: 4 for JSON; every zone that sees the relay wall for DENALI)")
+    p.add_argument("--min-distance", type=float,
+                   help="JSON only: leave out captures closer than this, metres (near field, crosstalk overlap; "
+                        "default: 0.06)")
     p.add_argument("--start", metavar="NAME=V,...", help="start values, e.g. bin_width_ps=95,start_offset_ps=-1100 "
                                                         "(default: from leading edges and sums of the data)")
     p.add_argument("--holdout", type=float, default=0.0,
                    help="fraction of captures kept out of the fit and scored (default: 0, fit on all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the holdout split (default: 0)")
-    p.add_argument("--lights", choices=["on", "off"], default="on",
-                   help="the captures' room lights: the noise floor becomes the ambient (on) or dark (off) rate")
+    p.add_argument("--seed", type=int, default=0, help="seed of the holdout split and the bootstrap (default: 0)")
+    p.add_argument("--bootstrap", type=int_type(0, 1000), default=0, metavar="N",
+                   help="also refit on N resamples of the fitted captures (with replacement) and report the spread: "
+                        "uncertainties that include model error, unlike Fisher's; 1-4 s per refit (default: off)")
+    p.add_argument("--lights", choices=["on", "off"],
+                   help="JSON only: the captures' room lights: the noise floor becomes the ambient (on) or dark (off) "
+                        "rate (default: on; DENALI captures are labelled, lights-off floors give the dark rate "
+                        "and lights-on floors the ambient rate)")
+    p.add_argument("--where", metavar="COL=V,...",
+                   help="DENALI folder or store: filter of the captures, e.g. zones=3x3,lights=off,object=A|NOOBJECT "
+                        "(columns of 'nlosplan dataset info'; alternatives a|b)")
+    p.add_argument("--fidelity", help="DENALI folder or store: fast-simulator quadrature of the matching scenes, "
+                                      "draft, low, default, high or reference (default: default)")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="DENALI folder: allow capture files that need pickle (they may run code when loaded)")
     p.add_argument("--out", default="nlosplan-out/calibrated_sensor.toml",
                    help="calibrated sensor file, .toml or .json ('' for none; default: %(default)s)")
     p.add_argument("--plot", default="nlosplan-out/calibration.png", help="residual plot PNG ('' for none)")

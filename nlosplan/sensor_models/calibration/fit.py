@@ -133,28 +133,32 @@ def _theta_of_z(z, free, fixed):
 
 
 def _deviance_fn(model, counts, mask, floor):
+    """``dev(theta, weights=None)``: mean Poisson deviance per masked bin (``weights``, shaped like the counts,
+    replace the mask: e.g. how often each capture was drawn by a bootstrap resample)."""
     n = jnp.asarray(counts, jnp.float64)
     m = jnp.asarray(mask, jnp.float64)
     fl = None if floor is None else jnp.asarray(floor, jnp.float64)
-    total = float(np.sum(mask))
 
-    def dev(theta):
+    def dev(theta, weights=None):
+        w = m if weights is None else weights
         mu = model(theta)
         if fl is not None:  # measured floor per capture zone instead of the global noise level
             mu = mu - theta[4] + fl
         mu = jnp.maximum(mu, 1e-12)
         d = 2.0 * (mu - n + jnp.where(n > 0, n * jnp.log(jnp.where(n > 0, n, 1.0) / mu), 0.0))
-        return jnp.sum(d * m) / total
+        return jnp.sum(d * w) / jnp.sum(w)
 
     return dev
 
 
-def _minimize(dev, free, theta0, max_evals: int):
+def _minimize(dev, free, theta0, max_evals: int, objective=None):
+    """BOBYQA over the normalized free parameters from ``theta0``; ``objective(z)`` (jitted by the caller, to be
+    reused across calls) replaces ``dev`` of the physical parameters."""
     import nlopt
 
     idx = [i for i in range(len(PARAMS)) if free[i]]
     z0 = np.array([PARAMS[i].to_unit(theta0[i]) for i in idx])
-    f = jax.jit(lambda z: dev(_theta_of_z(z, free, theta0)))
+    f = objective or jax.jit(lambda z: dev(_theta_of_z(z, free, theta0)))
     evals = [0]
 
     def objective(z, grad):
@@ -225,9 +229,35 @@ def initial_values(captures: CaptureSet, used: np.ndarray, timebase=None) -> dic
     return start
 
 
+def floor_counts(captures: CaptureSet, noise) -> np.ndarray | None:
+    """The floor per capture zone, shape (N, Z, 1), that ``noise`` asks for; None for one global level.
+
+    Parameters
+    ----------
+    captures : CaptureSet
+    noise : {"global", "measured"} or array of shape (N, Z)
+        ``"measured"``: the median of each zone's last :data:`FLOOR_BINS` bins;
+        an array: floors (counts per bin) measured by the caller.
+
+    Raises
+    ------
+    UserError
+        An unknown name, or an array of another shape or with negative or non-finite values.
+    """
+    if isinstance(noise, str):
+        if noise not in ("global", "measured"):
+            raise UserError(f"noise={noise!r} is unknown; allowed: global, measured")
+        return np.median(captures.counts[..., -FLOOR_BINS:], axis=-1)[..., None] if noise == "measured" else None
+    floor = np.asarray(noise, dtype=np.float64)
+    if floor.shape != captures.counts.shape[:2] or not np.all(np.isfinite(floor)) or np.any(floor < 0):
+        raise UserError(f"noise floors must be finite, >= 0 and shaped (captures, zones) = "
+                        f"{captures.counts.shape[:2]}, got shape {floor.shape}")
+    return floor[..., None]
+
+
 def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), start: dict | None = None,
                     pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0,
-                    noise: str = "global", joint: bool = True, max_evals: int = 600) -> CalibrationFit:
+                    noise="global", joint: bool = True, max_evals: int = 600) -> CalibrationFit:
     """Fit the calibration parameters to real captures.
 
     Parameters
@@ -240,9 +270,10 @@ def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), 
         from :func:`initial_values`. Values outside the bounds are rejected.
     pulse_shape, pulse_step_ps, pulse_t0_ps
         Non-parametric pulse (see :func:`.model.make_model`); None: Gaussian.
-    noise : {"global", "measured"}
+    noise : {"global", "measured"} or array of shape (N, Z)
         One noise floor for every capture (fitted by the ``noise`` step) or
-        each capture zone's own floor (median of its last 30 bins, not fitted).
+        each capture zone's own floor (median of its last 30 bins, or the
+        given floors in counts per bin; not fitted), see :func:`floor_counts`.
     joint : bool
         Refine every selected parameter together after the steps.
     max_evals : int
@@ -262,8 +293,7 @@ def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), 
     bad = [s for s in steps if s not in STEPS]
     if bad or not steps:
         raise UserError(f"unknown calibration step(s) {', '.join(bad) or '(none)'}; allowed: {', '.join(STEPS)}")
-    if noise not in ("global", "measured"):
-        raise UserError(f"noise={noise!r} is unknown; allowed: global, measured")
+    floor = floor_counts(captures, noise)
     used, messages = usable_zones(captures)
     values = initial_values(captures, used)
     for name, v in (start or {}).items():
@@ -273,14 +303,13 @@ def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), 
         values[name] = float(v)
     model = make_model(captures, pulse_shape, pulse_step_ps, pulse_t0_ps, values["bin_width_ps"],
                        values["start_offset_ps"])
-    floor = np.median(captures.counts[..., -FLOOR_BINS:], axis=-1)[..., None] if noise == "measured" else None
     mask = np.broadcast_to(used[..., None], captures.counts.shape)
     dev = _deviance_fn(model, captures.counts, mask, floor)
     theta = np.array([values[n] for n in PARAM_NAMES])
     fitted: list[str] = []
     step_log = []
     for step in steps:
-        names = [n for n in STEPS[step] if not (noise == "measured" and n == "noise_per_bin")]
+        names = [n for n in STEPS[step] if not (floor is not None and n == "noise_per_bin")]
         free = np.array([n in names for n in PARAM_NAMES])
         before = float(dev(jnp.asarray(theta)))
         theta, after, n_evals = _minimize(dev, free, theta, max_evals)
@@ -319,12 +348,85 @@ def _check_peaks(model, theta, captures, used, floor) -> None:
                         "bin_width_ps/start_offset_ps start (e.g. from 'nlosplan sensor fit-timebase')")
 
 
-def predict(fit: CalibrationFit, captures: CaptureSet, noise: str = "global") -> np.ndarray:
-    """Expected counts of ``captures`` under the fitted parameters, shape (N, Z, B)."""
+def predict(fit: CalibrationFit, captures: CaptureSet, noise="global") -> np.ndarray:
+    """Expected counts of ``captures`` under the fitted parameters, shape (N, Z, B).
+
+    ``noise`` as in :func:`fit_calibration` (a per-zone floor replaces the fitted global level).
+    """
     model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps, fit.values["bin_width_ps"],
                        fit.values["start_offset_ps"])
     mu = np.asarray(model(jnp.asarray(fit.theta())), dtype=np.float64)
-    if noise == "measured":
-        floor = np.median(captures.counts[..., -FLOOR_BINS:], axis=-1)[..., None]
+    floor = floor_counts(captures, noise)
+    if floor is not None:
         mu = mu - fit.values["noise_per_bin"] + floor
     return mu
+
+
+@dataclass
+class ZoneScores:
+    """Errors of a fit's prediction on captures (held out, usually), one entry per usable capture zone.
+
+    Attributes
+    ----------
+    index : list of [int, int]
+        ``[capture, zone]`` of each scored capture zone (zone: position in the capture set's zones).
+    captures : list of str
+        ``"<capture label> zone <zone>"`` of each.
+    peak_bin_error : list of int
+        ``argmax(pred) - argmax(meas)``, bins.
+    shape_l1 : list of float
+        ``sum |a pred_net - meas_net| / sum meas_net`` over the return's support plus 2 bins each
+        side, ``a`` matching the net sums (the shape, amplitude apart; net: above the floor, the
+        median of the last 30 bins).
+    amplitude_ratio : list of float
+        Predicted over measured net counts (the photon scale's error).
+    peak_bin_error_mean_abs, peak_bin_error_max_abs, shape_l1_mean, shape_l1_max, amplitude_ratio_median
+        Summaries of the three lists.
+    """
+
+    index: list
+    captures: list
+    peak_bin_error: list
+    shape_l1: list
+    amplitude_ratio: list
+    peak_bin_error_mean_abs: float
+    peak_bin_error_max_abs: int
+    shape_l1_mean: float
+    shape_l1_max: float
+    amplitude_ratio_median: float
+
+
+def zone_scores(fit: CalibrationFit, cs: CaptureSet, noise="measured") -> ZoneScores:
+    """Score a fit on captures (every usable zone, see :func:`usable_zones`); ``noise`` as :func:`predict`.
+
+    Zones whose prediction is zero everywhere above its floor (no simulated light) are not scored.
+
+    Raises
+    ------
+    UserError
+        No capture zone is usable or none can be scored.
+    """
+    used, _ = usable_zones(cs)
+    pred = predict(fit, cs, noise)
+    meas = np.asarray(cs.counts, dtype=np.float64)
+    floor_m = np.median(meas[..., -FLOOR_BINS:], axis=-1)
+    floor_p = np.median(pred[..., -FLOOR_BINS:], axis=-1)
+    index, labels, peaks, l1s, amps = [], [], [], [], []
+    for i, z in zip(*np.nonzero(used)):
+        pn = pred[i, z] - floor_p[i, z]
+        mn = meas[i, z] - floor_m[i, z]
+        if not pn.max() > 0:
+            continue
+        support = np.flatnonzero(pn > 1e-3 * pn.max())
+        win = slice(max(support[0] - 2, 0), support[-1] + 3)
+        a = mn[win].sum() / pn[win].sum()
+        index.append([int(i), int(z)])
+        labels.append(f"{cs.labels[i]} zone {int(z)}")
+        peaks.append(int(pred[i, z].argmax()) - int(meas[i, z].argmax()))
+        l1s.append(float(np.abs(a * pn[win] - mn[win]).sum() / mn[win].sum()))
+        amps.append(float(1.0 / a))
+    if not peaks:
+        raise UserError("no capture zone can be scored: the fit predicts no signal in any usable zone")
+    err = np.abs(peaks)
+    return ZoneScores(index, labels, peaks, l1s, amps, float(err.mean()), int(err.max()), float(np.mean(l1s)),
+                      float(np.max(l1s)), float(np.median(amps)))

@@ -12,12 +12,12 @@ part only: the time base from half-maximum leading edges
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.fit import FLOOR_BINS, CalibrationFit, fit_calibration, predict, usable_zones
+from nlosplan.sensor_models.calibration.fit import CalibrationFit, fit_calibration, usable_zones, zone_scores
 from nlosplan.sensor_models.calibration.model import CaptureSet
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
@@ -89,6 +89,7 @@ class PlaneHoldout:
     ``shape_l1``: ``sum |a pred_net - meas_net| / sum meas_net`` over the return's support plus
     2 bins each side, ``a`` matching the net sums (the shape, amplitude apart).
     ``amplitude_ratio``: predicted over measured net counts (the photon scale's error).
+    ``fit_indices``: the captures the fit used (indices into the loaded captures).
     """
 
     n_fit: int
@@ -102,29 +103,16 @@ class PlaneHoldout:
     shape_l1_mean: float
     shape_l1_max: float
     amplitude_ratio_median: float
+    fit_indices: list = field(default_factory=list)
 
 
 def holdout_scores(fit: CalibrationFit, cs: CaptureSet, distances, noise: str = "measured") -> PlaneHoldout:
-    """Score a fit on held-out captures (every usable zone)."""
-    used, _ = usable_zones(cs)
-    pred = predict(fit, cs, noise)
-    meas = np.asarray(cs.counts, dtype=np.float64)
-    floor_m = np.median(meas[..., -FLOOR_BINS:], axis=-1)
-    floor_p = np.median(pred[..., -FLOOR_BINS:], axis=-1)
-    peaks, l1s, amps, dists = [], [], [], []
-    for i, z in zip(*np.nonzero(used)):
-        pn = pred[i, z] - floor_p[i, z]
-        mn = meas[i, z] - floor_m[i, z]
-        support = np.flatnonzero(pn > 1e-3 * pn.max())
-        win = slice(max(support[0] - 2, 0), support[-1] + 3)
-        a = mn[win].sum() / pn[win].sum()
-        peaks.append(int(pred[i, z].argmax()) - int(meas[i, z].argmax()))
-        l1s.append(float(np.abs(a * pn[win] - mn[win]).sum() / mn[win].sum()))
-        amps.append(float(1.0 / a))
-        dists.append(float(distances[i]))
-    err = np.abs(peaks)
-    return PlaneHoldout(0, len(peaks), dists, peaks, l1s, amps, float(err.mean()), int(err.max()),
-                        float(np.mean(l1s)), float(np.max(l1s)), float(np.median(amps)))
+    """Score a fit on held-out captures (every usable zone, :func:`~.fit.zone_scores`)."""
+    s = zone_scores(fit, cs, noise)
+    dists = [float(distances[i]) for i, _ in s.index]
+    return PlaneHoldout(0, len(s.peak_bin_error), dists, s.peak_bin_error, s.shape_l1, s.amplitude_ratio,
+                        s.peak_bin_error_mean_abs, s.peak_bin_error_max_abs, s.shape_l1_mean, s.shape_l1_max,
+                        s.amplitude_ratio_median)
 
 
 def plane_holdout(captures: DistanceCaptures, arrivals, *, fit_fraction: float = 0.5, seed: int = 0,
@@ -144,6 +132,7 @@ def plane_holdout(captures: DistanceCaptures, arrivals, *, fit_fraction: float =
     cs_test = capture_set(captures, arrivals, zones, cs_fit.iterations, test_idx)
     scores = holdout_scores(fit, cs_test, captures.distance_m[test_idx], kw.get("noise", "measured"))
     scores.n_fit = int(fit_idx.size)
+    scores.fit_indices = [int(i) for i in fit_idx]
     return fit, scores
 
 
