@@ -17,7 +17,8 @@ from nlosplan.sensor_models.calibration import (
     make_model,
     scene_arrivals,
 )
-from nlosplan.sensor_models.calibration.denali import matching_scene, quiet_floors, split_positions, wall_zones
+from nlosplan.sensor_models.calibration.denali import quiet_floors, split_positions
+from nlosplan.sensor_models.calibration.denali_data import matching_scene, wall_zones
 from nlosplan.simulators import FastSimulator
 
 ITERS = 550_000

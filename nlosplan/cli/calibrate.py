@@ -116,7 +116,7 @@ def _parameter_lines(fit, boot) -> list[str]:
 
 
 def _cmd_calibrate(args) -> int:
-    from nlosplan.sensor_models.calibration.denali import is_capture_store
+    from nlosplan.sensor_models.calibration.denali_data import is_capture_store
 
     from nlosplan.sensor_models.calibration.bootstrap import MIN_RESAMPLES
 
@@ -212,6 +212,7 @@ def _calibrate_denali(args, t0: float) -> int:
     from nlosplan.sensor_models import resolve_sensor
     from nlosplan.sensor_models.calibration import STEPS, predict
     from nlosplan.sensor_models.calibration import denali as cal
+    from nlosplan.sensor_models.calibration import denali_data as inputs
 
     for flag, value in (("--lights", args.lights), ("--min-distance", args.min_distance)):
         if value is not None:
@@ -228,7 +229,7 @@ def _calibrate_denali(args, t0: float) -> int:
     from nlosplan.simulators.fast.fidelity import resolve_fidelity
 
     resolve_fidelity(fidelity)
-    caps = cal.load_denali_captures(args.captures, parse_where(args.where), trust_pickle=args.trust_pickle)
+    caps = inputs.load_denali_captures(args.captures, parse_where(args.where), trust_pickle=args.trust_pickle)
     if args.sensor:
         base = resolve_sensor(args.sensor)
     elif caps.sensor is not None:
@@ -236,14 +237,14 @@ def _calibrate_denali(args, t0: float) -> int:
     else:
         raise UserError(f"the captures in {args.captures} were stored with several sensors; give --sensor, or "
                         "filter with --where sensor_hash=...")
-    cal.check_sensor(caps, base)
+    inputs.check_sensor(caps, base)
     cal.check_noise(caps.labels["lights"], args.noise)
-    zones = _zones(args.zones, base.n_zones) if args.zones else cal.wall_zones(base, fidelity=fidelity)
+    zones = _zones(args.zones, base.n_zones) if args.zones else inputs.wall_zones(base, fidelity=fidelity)
     pulse = args.pulse or ("shape" if base.pulse_shape is not None else "gaussian")
     cal.pulse_model(base, pulse)
     where = "DENALI folder" if Path(args.captures).is_dir() else "capture store"
     note(args, f"calibrating {base.name} on {len(caps)} captures of {args.captures} ({where}; {', '.join(steps)}) ...")
-    cs = cal.denali_capture_set(caps, base, zones=zones, fidelity=fidelity)
+    cs = inputs.denali_capture_set(caps, base, zones=zones, fidelity=fidelity)
     groups = caps.floor_groups()
     kw = dict(steps=steps, pulse=pulse, noise=args.noise, start=start)
     holdout = None

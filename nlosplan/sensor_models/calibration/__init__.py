@@ -5,18 +5,21 @@
 - :mod:`.bootstrap`: uncertainties from refits on captures resampled with replacement.
 - :mod:`.plane`: captures of a plane at known distances (``tmf882x_distance``), held-out scores,
   the calibrated :class:`~nlosplan.sensor_models.config.SensorConfig`.
-- :mod:`.denali`: DENALI-layout captures (a folder or a capture store) with the arrivals of their
-  matching simulated DENALI scenes, a holdout split by gantry position, the calibrated sensor.
+- :mod:`.denali_data`: DENALI-layout captures (a folder or a capture store) with the arrivals of their
+  matching simulated DENALI scenes.
+- :mod:`.denali`: the fit on DENALI captures, a holdout split by gantry position, the calibrated sensor.
 """
 
 from nlosplan.sensor_models.calibration.bootstrap import BootstrapErrors, bootstrap_errors
 from nlosplan.sensor_models.calibration.denali import (
-    DenaliCaptures,
     DenaliHoldout,
     calibrated_denali_sensor,
-    denali_capture_set,
     denali_holdout,
     fit_denali,
+)
+from nlosplan.sensor_models.calibration.denali_data import (
+    DenaliCaptures,
+    denali_capture_set,
     load_denali_captures,
     scene_arrivals,
 )
