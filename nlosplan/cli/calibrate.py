@@ -115,6 +115,13 @@ def _parameter_lines(fit, boot) -> list[str]:
     return lines
 
 
+def _scores_text(s) -> str:
+    """Held-out peak-bin error, shape L1 and amplitude ratio of a PlaneHoldout or ZoneScores, one line."""
+    return (f"peak-bin error mean |.| {s.peak_bin_error_mean_abs:.3f}, max {s.peak_bin_error_max_abs} bins; "
+            f"shape L1 mean {100 * s.shape_l1_mean:.2f} %, max {100 * s.shape_l1_max:.2f} %; "
+            f"amplitude pred/meas median {s.amplitude_ratio_median:.3f}")
+
+
 def _cmd_calibrate(args) -> int:
     from nlosplan.sensor_models.calibration.denali_data import is_capture_store
 
@@ -196,10 +203,8 @@ def _calibrate_plane(args, t0: float) -> int:
     lines += _parameter_lines(fit, boot)
     lines += [f"  note: {m}" for m in fit.messages]
     if holdout is not None:
-        lines.append(f"held out {holdout.n_holdout} captures (fit on {holdout.n_fit}, seed {args.seed}): peak-bin error "
-                     f"mean |.| {holdout.peak_bin_error_mean_abs:.3f}, max {holdout.peak_bin_error_max_abs} bins; "
-                     f"shape L1 mean {100 * holdout.shape_l1_mean:.2f} %, max {100 * holdout.shape_l1_max:.2f} %; "
-                     f"amplitude pred/meas median {holdout.amplitude_ratio_median:.3f}")
+        lines.append(f"held out {holdout.n_holdout} captures (fit on {holdout.n_fit}, seed {args.seed}): "
+                     + _scores_text(holdout))
     lines += [f"wrote {k}: {v}" for k, v in files.items()]
     emit(args, data, "\n".join(lines))
     return 0
@@ -285,10 +290,7 @@ def _calibrate_denali(args, t0: float) -> int:
         h = holdout.scores
         lines.append(f"held out {len(holdout.positions_holdout)} positions ({holdout.n_holdout} captures, "
                      f"{len(h.peak_bin_error)} capture zones; fit on {len(holdout.positions_fit)} positions, "
-                     f"{holdout.n_fit} captures, seed {args.seed}): peak-bin error mean |.| "
-                     f"{h.peak_bin_error_mean_abs:.3f}, max {h.peak_bin_error_max_abs} bins; shape L1 mean "
-                     f"{100 * h.shape_l1_mean:.2f} %, max {100 * h.shape_l1_max:.2f} %; amplitude pred/meas median "
-                     f"{h.amplitude_ratio_median:.3f}")
+                     f"{holdout.n_fit} captures, seed {args.seed}): " + _scores_text(h))
     lines += [f"wrote {k}: {v}" for k, v in files.items()]
     emit(args, data, "\n".join(lines))
     return 0
