@@ -33,8 +33,10 @@ $(STAMP): pyproject.toml
 demo: setup
 	$(BIN)/nlosplan design
 
+# Tests marked slow (whole-catalog and end-to-end runs that have faster siblings) run only
+# when CI is set (CI=true make test, as .ci/run is called) or with SLOW=1.
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(if $(or $(CI),$(SLOW)),,-m "not slow")
 
 check: setup
 	$(BIN)/nlosplan check

@@ -150,6 +150,7 @@ def test_bootstrap_agrees_with_fisher_when_the_model_is_right(simulated, recover
     assert b.to_dict()["intervals"]["bin_width_ps"][0] == b.intervals["bin_width_ps"][0]
 
 
+@pytest.mark.slow  # ~20 s: a full fit and 10 refits
 def test_bootstrap_sees_what_fisher_cannot_a_time_base_wandering_between_captures():
     from nlosplan.sensor_models.calibration import bootstrap_errors
 

@@ -87,6 +87,7 @@ def test_help_has_examples(capsys):
     assert "examples:" in out and "nlosplan simulate --scene wall --sensor" in out
 
 
+@pytest.mark.slow  # the whole catalog (~90 s); every case also has its own test in tests/test_stability_*.py
 def test_check_json_passes_at_least_20_cases(capsys):
     code, out, _ = run(capsys, "check", "--json")
     data = json.loads(out)

@@ -41,7 +41,8 @@ SENSOR = preset("tmf8828-3x3-short").replace(pulse_shape=None, pulse_fwhm_ps=180
                                              saturation=False, dark_rate_hz=0.0)
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "corner-lambertian" else n
+                                  for n in sorted(SCENES)])  # Lambertian: ~30 s (the full double integral)
 def test_gradient_wrt_object_position_matches_finite_differences(name):
     f, sc, sp, wts = setup(SCENES[name](), SENSOR)
 
