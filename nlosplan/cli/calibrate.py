@@ -49,7 +49,8 @@ noise floor, crosstalk peak. DENALI's three calibration functions are steps
 that stack: scale (global scaling), pulse (pulse-width and time-base
 matching), noise (noise matching); a joint pass refines them together.
 Uncertainties: Fisher information (statistical only; unidentifiable parameters
-are flagged). Saturated zones and zones without signal are left out with a
+are flagged) and, with --bootstrap N, the spread of N refits on the fitted
+captures resampled with replacement (it includes the model's own error). Saturated zones and zones without signal are left out with a
 message. With --holdout F a seeded part F is kept out of the fit (captures, or
 gantry positions for DENALI) and scored: peak-bin error, the normalized L1 of
 the histogram shape and the amplitude ratio. Writes the calibrated sensor file

@@ -108,7 +108,7 @@ def bootstrap_errors(captures: CaptureSet, fit: CalibrationFit, *, resamples: in
     for b in range(resamples):
         draws = np.bincount(rng.choice(usable, size=usable.size, replace=True), minlength=n).astype(np.float64)
         w = jnp.asarray(np.broadcast_to((fit.used * draws[:, None])[..., None], captures.counts.shape))
-        theta, _, _ = _minimize(dev, free, theta0, max_evals, objective=lambda z, w=w: weighted(jnp.asarray(z), w))
+        theta, _, _ = _minimize(dev, free, theta0, max_evals, compiled=lambda z, w=w: weighted(jnp.asarray(z), w))
         rows.append(theta)
         if progress is not None:
             progress(b + 1, resamples)

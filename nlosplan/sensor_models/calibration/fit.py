@@ -151,14 +151,14 @@ def _deviance_fn(model, counts, mask, floor):
     return dev
 
 
-def _minimize(dev, free, theta0, max_evals: int, objective=None):
-    """BOBYQA over the normalized free parameters from ``theta0``; ``objective(z)`` (jitted by the caller, to be
+def _minimize(dev, free, theta0, max_evals: int, compiled=None):
+    """BOBYQA over the normalized free parameters from ``theta0``; ``compiled(z)`` (jitted by the caller, to be
     reused across calls) replaces ``dev`` of the physical parameters."""
     import nlopt
 
     idx = [i for i in range(len(PARAMS)) if free[i]]
     z0 = np.array([PARAMS[i].to_unit(theta0[i]) for i in idx])
-    f = objective or jax.jit(lambda z: dev(_theta_of_z(z, free, theta0)))
+    f = compiled or jax.jit(lambda z: dev(_theta_of_z(z, free, theta0)))
     evals = [0]
 
     def objective(z, grad):

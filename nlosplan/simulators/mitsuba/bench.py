@@ -2,8 +2,8 @@
 
 Scenes: DENALI 3x3 with Lambertian objects (both backends model the same
 physics there). Reference: the twin at ``reference_spp`` samples per pixel
-(its own Monte-Carlo error is estimated from two independent halves and
-reported). Error: relative L1 of the three-bounce histogram summed over the
+on :data:`REFERENCE_ZONE_SUB` film pixels per zone axis (its own Monte-Carlo
+error is estimated from two independent halves and reported). Error: relative L1 of the three-bounce histogram summed over the
 scenes; seconds: per scene, compile and scene loading included for the
 twin's render (what a user waits for), JAX compile excluded for the fast
 backend (a warm-up call per level, then the mean of 5 calls; also batched:
@@ -130,7 +130,8 @@ def format_bench_fidelity(result: dict) -> str:
                  f"{result['speedup_at_equal_error']:.0f}x; per level: " +
                  ", ".join(f"{k} {v:.0f}x" for k, v in result["speedups"].items()))
     if "speedups_batched" in result:
-        lines.append(f"batched over 20 positions per call: {result['speedup_at_equal_error_batched']:.0f}x at "
+        n = 10 * len(result["config"]["scenes"])
+        lines.append(f"batched ({n} scenes per call): {result['speedup_at_equal_error_batched']:.0f}x at "
                      f"{result['speedup_level']}; per level: " +
                      ", ".join(f"{k} {v:.0f}x" for k, v in result["speedups_batched"].items()))
     return "\n".join(lines)
