@@ -64,7 +64,7 @@ def synthetic_dataset(*, objects=OBJECTS, sizes=("4in", "8in"), n_side: int = 6,
 def random_dataset(n_objects: int = 30, n_positions: int = 100, sizes=("4in", "8in"), bins: int = 128,
                    seed: int = 0) -> Dataset:
     """Random counts of DENALI's shape, (objects x sizes x positions, 3, 3, bins), for timing."""
-    from nlosplan.simulators.presets.denali import DENALI_OBJECTS, class_group, positions_xy
+    from nlosplan.denali import DENALI_OBJECTS, class_group, positions_xy
 
     rng = np.random.default_rng(seed)
     xy = positions_xy()

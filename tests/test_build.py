@@ -13,7 +13,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
 from nlosplan.simulators import denali_scene
 from nlosplan.simulators.fast.simulator import FastSimulator
-from nlosplan.simulators.presets.denali import positions_xy
+from nlosplan.denali import positions_xy
 from nlosplan.tasks.build import build_dataset, draw_captures, scene_seed
 from nlosplan.tasks.store import CaptureStore
 

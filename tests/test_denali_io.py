@@ -8,7 +8,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
-from nlosplan.simulators.presets.denali import positions_xy
+from nlosplan.denali import positions_xy
 from nlosplan.tasks.denali_io import export_denali, import_denali, load_positions
 from nlosplan.tasks.store import CaptureStore
 

@@ -9,23 +9,12 @@ from importlib import resources
 import numpy as np
 import pytest
 
+from nlosplan.denali import CLASS_GROUPS, DENALI_OBJECTS, N_POSITIONS, SIZES, class_group, object_pose, positions_xy
 from nlosplan.errors import UserError
-from nlosplan.simulators.presets import (
-    CLASS_GROUPS,
-    DENALI_OBJECTS,
-    N_POSITIONS,
-    SIZES,
-    class_group,
-    denali_scene,
-    mount_mesh,
-    object_mesh,
-    object_pose,
-    positions_xy,
-    rig,
-)
+from nlosplan.simulators.presets import denali_scene, mount_mesh, object_mesh, rig
 from nlosplan.simulators.scene import Scene
 
-DATA = resources.files("nlosplan.simulators") / "data" / "denali"
+DATA = resources.files("nlosplan.denali") / "data"
 # TMF8828 3x3 SPAD map 33 x 32 deg (SENSOR_FACTS.md): half-diagonal ~ 23 deg
 FOV_HALF_DIAGONAL_DEG = math.hypot(33 / 2, 32 / 2)
 

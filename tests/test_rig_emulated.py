@@ -8,10 +8,10 @@ import pytest
 from nlosplan.errors import UserError
 from nlosplan.hardware.commands import Capture, Checkpoint, Move, SetLights
 from nlosplan.hardware.executor import Executor, RunContext, dry_run
-from nlosplan.hardware.geometry import grid_mm, label_xy, object_pose_mm
+from nlosplan.denali.geometry import grid_mm, label_xy, object_pose_mm
 from nlosplan.hardware.plans import ask_tell_plan, finalize_wrapper, positions_plan, raster_plan, read_positions
 from nlosplan.hardware.rig import emulated_rig
-from nlosplan.simulators.presets.denali import object_pose, positions_xy
+from nlosplan.denali import object_pose, positions_xy
 from nlosplan.tasks.store import CaptureStore
 
 CTX = RunContext("A", "8in", source="emulated:rig", plan="test")
@@ -46,7 +46,7 @@ def test_ten_position_raster_with_three_repeats_lands_thirty_captures(tmp_path):
 
 def test_emulated_histograms_follow_the_gantry_to_any_position(tmp_path):
     """Off-grid positions work; the stored counts are Poisson draws of the simulator at that position."""
-    from nlosplan.hardware.geometry import scene_at
+    from nlosplan.simulators.presets.denali import scene_at
     from nlosplan.sensor_models import preset
     from nlosplan.simulators import expected_histogram
 

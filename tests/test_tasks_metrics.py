@@ -90,7 +90,8 @@ def test_breakdown_groups_and_counts(task):
 
 
 def test_quadrants_on_the_denali_positions():
-    from nlosplan.simulators.presets.denali import positions_xy, rig
+    from nlosplan.denali import positions_xy
+    from nlosplan.simulators.presets.denali import rig
 
     xy = positions_xy()
     lab = pd.DataFrame({"x": xy[:, 0], "y": xy[:, 1]})
@@ -117,7 +118,7 @@ def test_quadrants_on_the_denali_positions():
 
 
 def test_quadrants_ignore_repeats_and_row_order():
-    from nlosplan.simulators.presets.denali import positions_xy
+    from nlosplan.denali import positions_xy
 
     xy = positions_xy()
     lab = pd.DataFrame({"x": xy[:, 0], "y": xy[:, 1]})

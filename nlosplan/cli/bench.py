@@ -19,7 +19,7 @@ from nlosplan.simulators.fast.bench import (
     bench_simulate,
     bench_steps,
 )
-from nlosplan.simulators.presets.denali import N_POSITIONS
+from nlosplan.denali import N_POSITIONS
 
 def _cmd_bench_histogram(args) -> int:
     from nlosplan.reports.tables import format_table

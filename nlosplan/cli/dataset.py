@@ -12,7 +12,7 @@ from nlosplan.cli.common import command_group, emit, int_type, note, progress_ba
 # ----------------------------------------------------------------- option values
 def _objects(text: str) -> list[str]:
     """``all``, or DENALI objects and class groups separated by commas (``i``, ``halfcircle`` accepted)."""
-    from nlosplan.simulators.presets.denali import CLASS_GROUPS, DENALI_OBJECTS
+    from nlosplan.denali import CLASS_GROUPS, DENALI_OBJECTS
     from nlosplan.tasks.denali_io import OBJECT_ALIASES
 
     out: list[str] = []
@@ -31,7 +31,7 @@ def _objects(text: str) -> list[str]:
 
 def _positions(text: str) -> list[int]:
     """``0-99``, ``0,5,9`` or a mix such as ``0-9,20-29`` (gantry positions 0..99)."""
-    from nlosplan.simulators.presets.denali import N_POSITIONS
+    from nlosplan.denali import N_POSITIONS
 
     out: list[int] = []
     for tok in (t.strip() for t in text.split(",")):

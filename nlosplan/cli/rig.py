@@ -153,7 +153,7 @@ def _view_check(args):
         cfg = args.sensor_config
     else:
         cfg = sensor_preset(args.zones, args.range_mode)
-    from nlosplan.simulators.presets.denali import DENALI_OBJECTS
+    from nlosplan.denali import DENALI_OBJECTS
 
     obj = args.object if args.object in DENALI_OBJECTS else "A"
     return lambda x, y: view_problem(cfg, obj, args.size if args.size in ("4in", "8in") else "8in", x, y)

@@ -28,9 +28,10 @@ from functools import lru_cache
 
 import numpy as np
 
+from nlosplan.denali.rig import object_poses, tag1_positions
 from nlosplan.errors import UserError
 
-__all__ = ["GRID_N", "PITCH_MM", "TRAVEL_MM", "grid_index", "grid_mm", "label_xy", "object_pose_mm", "scene_at"]
+__all__ = ["GRID_N", "PITCH_MM", "TRAVEL_MM", "grid_index", "grid_mm", "label_xy", "object_pose_mm"]
 
 GRID_N = 10
 TRAVEL_MM = 320.0
@@ -61,10 +62,8 @@ def grid_index(x_mm: float, y_mm: float) -> int:
 
 @lru_cache(maxsize=1)
 def _tables():
-    from nlosplan.simulators.presets.denali import _labels, _object_poses
-
-    poses = np.asarray(_object_poses())
-    labels = np.asarray(_labels())[:, :2]
+    poses = np.asarray(object_poses())
+    labels = np.asarray(tag1_positions())[:, :2]
     grid = np.zeros((GRID_N, GRID_N, 4, 4))
     lab = np.zeros((GRID_N, GRID_N, 2))
     xy = np.zeros((GRID_N * GRID_N, 2))
@@ -101,7 +100,7 @@ def _check_mm(x_mm: float, y_mm: float) -> tuple[float, float]:
 def object_pose_mm(x_mm: float, y_mm: float) -> np.ndarray:
     """Object-to-world transform, shape (4, 4), metres, with the gantry at (x, y) mm.
 
-    Equals :func:`nlosplan.simulators.presets.denali.object_pose` at the grid
+    Equals :func:`nlosplan.denali.rig.object_pose` at the grid
     points (see the module notes for the interpolation between them).
     """
     x, y = _check_mm(x_mm, y_mm)
@@ -125,28 +124,3 @@ def label_xy(x_mm: float, y_mm: float) -> tuple[float, float]:
     v = np.array([x, y, 1.0]) @ a_l + _bilinear(res_l, x, y)
     return float(v[0]), float(v[1])
 
-
-def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off"):
-    """The DENALI scene with the object at gantry (x, y) mm (any point, not only the grid).
-
-    Parameters
-    ----------
-    obj, size, lights
-        As :func:`nlosplan.simulators.denali_scene`.
-    x_mm, y_mm : float
-        Gantry position, millimetres.
-
-    Returns
-    -------
-    Scene
-        ``meta`` has ``position`` (the grid index, or -1 off the grid),
-        ``object_xy`` (:func:`label_xy`) and ``gantry_mm``.
-    """
-    from nlosplan.simulators.presets.denali import denali_scene
-
-    base = denali_scene(obj, size, 0, lights)
-    pose = object_pose_mm(x_mm, y_mm)
-    meta = {**base.meta, "position": grid_index(x_mm, y_mm), "object_xy": list(label_xy(x_mm, y_mm)),
-            "gantry_mm": [float(x_mm), float(y_mm)]}
-    return base.replace(objects=tuple(o.moved_to(pose) for o in base.objects), meta=meta,
-                        name=f"denali {base.objects[0].name} at ({float(x_mm):.1f}, {float(y_mm):.1f}) mm")

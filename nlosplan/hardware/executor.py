@@ -113,7 +113,7 @@ class RunSummary:
 
 def view_problem(sensor_config, obj: str, size: str, x_mm: float, y_mm: float) -> str | None:
     """On the DENALI geometry: a message when the object at (x, y) mm is in the LiDAR's direct view, else None."""
-    from nlosplan.hardware.geometry import scene_at
+    from nlosplan.simulators import scene_at
     from nlosplan.simulators import explain
 
     warnings = explain(scene_at(obj, size, x_mm, y_mm), sensor_config, fidelity="draft").warnings
@@ -236,7 +236,7 @@ class Executor:
 
     # ------------------------------------------------------------------ capture
     def _labels(self, cmd: Capture, step: int) -> dict:
-        from nlosplan.hardware.geometry import grid_index, label_xy
+        from nlosplan.denali import grid_index, label_xy
 
         x, y = self._target
         labels = {"object": self.ctx.object, "size": self.ctx.size, "position": grid_index(x, y),

@@ -18,7 +18,7 @@ from typing import Callable, Iterable, Sequence
 
 from nlosplan.errors import UserError
 from nlosplan.hardware.commands import Capture, CaptureResult, Checkpoint, Move, Plan, SetLights
-from nlosplan.hardware.geometry import GRID_N, grid_index, grid_mm
+from nlosplan.denali.geometry import GRID_N, grid_index, grid_mm
 
 __all__ = ["ask_tell_plan", "finalize_wrapper", "positions_plan", "raster_plan", "read_positions"]
 

@@ -139,7 +139,7 @@ class SceneHistograms:
         self.computed = 0
 
     def __call__(self, zones: str, range_mode: str):
-        from nlosplan.hardware.geometry import scene_at
+        from nlosplan.simulators import scene_at
         from nlosplan.simulators import expected_histogram
 
         sensor = sensor_preset(zones, range_mode)

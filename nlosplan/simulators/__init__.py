@@ -20,7 +20,7 @@ from nlosplan.simulators.api import (
 )
 from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity
 from nlosplan.simulators.meshes import load_obj, sample_surface, square_patch, surface_quadrature
-from nlosplan.simulators.presets import corner_scene, denali_scene
+from nlosplan.simulators.presets import corner_scene, denali_scene, scene_at
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, NLOSWarning, Rect, Scene
 from nlosplan.simulators.wall import WallScene, simulate_wall, wall_arrivals
 
@@ -45,6 +45,7 @@ __all__ = [
     "load_obj",
     "sample",
     "sample_surface",
+    "scene_at",
     "simulate",
     "simulate_wall",
     "square_patch",

@@ -36,17 +36,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 from nlosplan._jax import jax, jnp
+from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES, class_group, positions_xy
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
-from nlosplan.simulators.presets.denali import (
-    DENALI_OBJECTS,
-    N_POSITIONS,
-    SIZES,
-    class_group,
-    denali_scene,
-    positions_xy,
-)
+from nlosplan.simulators.presets.denali import denali_scene
 from nlosplan.simulators.scene import NLOSWarning
 from nlosplan.tasks.denali_io import OBJECT_ALIASES
 from nlosplan.tasks.records import capture_key, sensor_hash, zones_of

@@ -31,7 +31,7 @@ import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.simulators.presets.denali import DENALI_OBJECTS, class_group
+from nlosplan.denali import DENALI_OBJECTS, class_group
 from nlosplan.tasks.records import capture_key, sensor_hash, zones_of
 
 __all__ = ["BACKGROUNDS", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
@@ -57,7 +57,7 @@ def load_positions(path=None) -> dict[int, tuple[float, float]]:
     ``load_capture_number_to_location_mapping``); other keys are ignored.
     """
     if path is None:
-        from nlosplan.simulators.presets.denali import positions_xy
+        from nlosplan.denali import positions_xy
 
         return {p: (float(x), float(y)) for p, (x, y) in enumerate(positions_xy())}
     try:

@@ -28,7 +28,8 @@ from scipy import stats
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.simulators.fast.simulator import FastSimulator
-from nlosplan.simulators.presets.denali import DENALI_OBJECTS, N_POSITIONS, SIZES, denali_scene
+from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES
+from nlosplan.simulators.presets.denali import denali_scene
 from nlosplan.tasks.bounds import fidelity_label
 
 __all__ = ["TASKS", "RULES", "IdealObserverResult", "binomial_interval", "ideal_observer", "observer_accuracy"]

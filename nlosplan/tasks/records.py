@@ -179,7 +179,7 @@ def _check_labels(labels: dict, sensor: SensorConfig) -> dict:
         raise UserError(f"capture zones {lab['zones']!r} differ from the sensor's {zones_of(sensor)}")
     lab["zones"] = zones_of(sensor)
     if lab["class_group"] is None:
-        from nlosplan.simulators.presets.denali import DENALI_OBJECTS, class_group
+        from nlosplan.denali import DENALI_OBJECTS, class_group
 
         if lab["object"] not in DENALI_OBJECTS:
             raise UserError(f"give class_group for object {lab['object']!r} (not a DENALI object)")

@@ -34,8 +34,8 @@ CALIBRATION_PARAMETERS = ("dx_m", "dy_m", "log_photon_scale", "log_albedo")
 
 
 def denali_scene_fn(obj: str = "A", size: str = "8in", lights: str = "off"):
-    """``scene_fn(x_mm, y_mm)`` for the DENALI rig (:func:`nlosplan.hardware.geometry.scene_at`)."""
-    from nlosplan.hardware.geometry import scene_at
+    """``scene_fn(x_mm, y_mm)`` for the DENALI rig (:func:`nlosplan.simulators.presets.denali.scene_at`)."""
+    from nlosplan.simulators import scene_at
 
     return lambda x_mm, y_mm: scene_at(obj, size, x_mm, y_mm, lights)
 

@@ -25,7 +25,7 @@ def raster_order(points_mm) -> np.ndarray:
     """DENALI's snake over candidates: its 10 x 10 grid points by position index when all 100 are
     candidates, else every candidate row by row (increasing y), alternating direction. Returns
     candidate indices."""
-    from nlosplan.hardware.geometry import grid_index
+    from nlosplan.denali import grid_index
 
     pts = np.asarray(points_mm, dtype=np.float64)
     grid = np.array([grid_index(x, y) for x, y in pts])

@@ -46,7 +46,7 @@ QUICK_OBJECTS = ("A", "S", "O", "V", "3", "7", "circle", "plus", "triangle", "mi
 
 def full_config() -> DesignConfig:
     """The main job: all 30 objects, both sizes, 50 positions; the whole default space."""
-    from nlosplan.simulators.presets.denali import DENALI_OBJECTS
+    from nlosplan.denali import DENALI_OBJECTS
 
     return DesignConfig(scenes=SceneSet(objects=DENALI_OBJECTS), label="full")
 

@@ -178,7 +178,7 @@ def load_reference(path: str | Path) -> ReferenceData:
 
 
 def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
-    from nlosplan.simulators.presets.denali import class_group, positions_xy
+    from nlosplan.denali import class_group, positions_xy
 
     xy = positions_xy()
     rows = [{"object": o, "size": s, "class_group": class_group(o), "position": p, "x": float(xy[p, 0]),

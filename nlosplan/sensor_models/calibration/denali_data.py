@@ -223,7 +223,8 @@ def matching_scene(obj: str, size: str, position: int, lights="off", **options):
     -------
     Scene
     """
-    from nlosplan.simulators.presets.denali import DENALI_OBJECTS, denali_scene
+    from nlosplan.denali import DENALI_OBJECTS
+    from nlosplan.simulators.presets.denali import denali_scene
 
     if obj == "NOOBJECT":
         return denali_scene(DENALI_OBJECTS[0], size, position, lights, **options).without_objects()

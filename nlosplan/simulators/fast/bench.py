@@ -31,6 +31,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
+from nlosplan.denali import N_POSITIONS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.presets import resolve_sensor
@@ -52,7 +53,7 @@ from nlosplan.simulators.fast.bench_metrics import (
 )
 from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
 from nlosplan.simulators.fast.simulator import FastSimulator
-from nlosplan.simulators.presets.denali import N_POSITIONS, denali_scene
+from nlosplan.simulators.presets.denali import denali_scene
 
 #: Target of the fast simulator: relative L1 error of the object histogram at most this ...
 TARGET_REL_L1 = 0.01

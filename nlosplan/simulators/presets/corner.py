@@ -26,9 +26,10 @@ from typing import Any
 
 import numpy as np
 
+from nlosplan.denali.rig import ALIASES, DENALI_OBJECTS, SIZES
 from nlosplan.errors import UserError
 from nlosplan.simulators.meshes import load_obj, square_patch
-from nlosplan.simulators.presets import denali
+from nlosplan.simulators.presets.denali import object_mesh
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene, rigid_transform
 
 __all__ = ["corner_scene"]
@@ -69,9 +70,9 @@ def _object_mesh(obj: Any, size: float) -> tuple[Mesh, np.ndarray, str]:
         return square_patch(size), _PATCH_TO_WALL, "patch"
     if isinstance(obj, str) and "_" in obj:
         name, sz = obj.rsplit("_", 1)
-        known = denali._ALIASES.get(name, name) in denali.DENALI_OBJECTS and sz in denali.SIZES
+        known = ALIASES.get(name, name) in DENALI_OBJECTS and sz in SIZES
         if known:
-            mesh = denali.object_mesh(name, sz)
+            mesh = object_mesh(name, sz)
             return mesh, _DENALI_TO_WALL, mesh.name
     raise UserError(
         f"object={obj!r} is not allowed; allowed: 'patch', a Mesh, a path to an .obj file, "

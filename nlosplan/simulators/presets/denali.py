@@ -1,30 +1,12 @@
 """The DENALI capture rig (CVPR 2026) as a :class:`~nlosplan.simulators.scene.Scene`.
 
-Sources
--------
-Geometry, calibration and meshes are the public DENALI repository's
-(github.com/NikhilBehari/denali, commit 9e1083293a4f6aac5e674c9bf0d948dc0697f8c3,
-MIT licence), packaged in ``nlosplan/simulators/data/denali``. Placement
-follows DENALI's own digital twin (``digitaltwin/scene.py``):
-
-- LiDAR: the co-located camera of ``cameras.json`` (OpenCV extrinsic); the
-  TMF8828 sits rigidly on the same mount and looks the same way.
-- Relay wall: a 0.93 x 0.6096 m rectangle placed from wall tag 5.
-- Tables: two 0.78 x 1.524 m rectangles placed from tags 14 and 15.
-- Object at gantry position ``p``: ``T(tag 1 at p) . Rx(-90 deg) .
-  translate(0, -0.005, -0.04)`` (the mount's y-up to z-up turn and offset),
-  with tag 1's averaged pose from ``poses.json``. The mesh's -z face then
-  looks at the wall from about 0.3 m.
-
-World frame: the tracking rig's, metres, z up; tables at z ~ 0, relay wall
-near y ~ 0.80, LiDAR at (0.459, 0.321, 0.373).
-
-Localization labels
--------------------
-:func:`positions_xy` returns DENALI's localization labels
-(``tag1_positions.json``, what its benchmark regresses). They sit a nearly
-constant (0.038, 0.028) m (in x, y) from the averaged tag-1 poses that place
-the mesh; both are kept as published.
+The rig's facts (objects, sizes, class groups, tag poses, object poses per
+gantry position, localization labels, wall and table placement constants,
+the gantry in millimetres) live in :mod:`nlosplan.denali`, with the packaged
+DENALI files and their sources; this module turns them into scenes: the
+LiDAR from the co-located camera, the relay wall from tag 5, the tables from
+tags 14 and 15, the object meshes (loaded by :mod:`nlosplan.simulators.meshes`)
+at their poses.
 
 Assumptions (to be calibrated against captures)
 -----------------------------------------------
@@ -37,83 +19,38 @@ Assumptions (to be calibrated against captures)
 
 from __future__ import annotations
 
-import json
-import math
 from functools import lru_cache
 from importlib import resources
 from typing import Any
 
 import numpy as np
 
+from nlosplan.denali.geometry import grid_index, label_xy, object_pose_mm
+from nlosplan.denali.rig import (
+    TABLE_SIZE,
+    WALL_SIZE,
+    WALL_TAG_DROP,
+    WALL_TAG_MARGIN,
+    camera_pose,
+    check_object,
+    check_position,
+    check_size,
+    class_group,
+    data_dir,
+    object_poses,
+    tag1_positions,
+    tag_pose,
+)
 from nlosplan.errors import UserError
 from nlosplan.simulators.meshes import load_obj
-from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene, rigid_transform
+from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene
 
-__all__ = [
-    "CLASS_GROUPS", "DENALI_OBJECTS", "N_POSITIONS", "SIZES", "class_group", "denali_scene",
-    "mount_mesh", "object_mesh", "object_pose", "positions_xy", "rig",
-]
-
-CLASS_GROUPS: dict[str, tuple[str, ...]] = {
-    "numbers": tuple(str(d) for d in range(10)),
-    "letters": ("A", "B", "C", "D", "E", "I", "O", "S", "U", "V"),
-    "shapes": ("circle", "downarrow", "hexagon", "minus", "plus", "semicircle", "square", "triangle", "uparrow",
-               "widerectangle"),
-}
-DENALI_OBJECTS: tuple[str, ...] = sum(CLASS_GROUPS.values(), ())
-SIZES: tuple[str, ...] = ("4in", "8in")
-N_POSITIONS = 100
-
-_ALIASES = {"i": "I"}
-WALL_SIZE = (0.93, 0.6096)  # along tag-5 x, along tag-5 y (metres)
-TABLE_SIZE = (0.78, 1.524)  # along tag x, along tag y (metres)
-_TAG_MARGIN = 0.068 / 2  # half the wall tags' printed size (metres)
-_WALL_TAG_DROP = 0.186  # tag 5 above the wall's bottom edge (metres)
-_MOUNT_OFFSET = (0.0, -0.005, -0.04)  # object/mount frame offset from tag 1 (metres)
-
-
-def _data():
-    return resources.files("nlosplan.simulators") / "data" / "denali"
-
-
-@lru_cache(maxsize=None)
-def _json(name: str) -> dict:
-    return json.loads((_data() / name).read_text(encoding="utf-8"))
-
-
-def _tag(pose: dict) -> np.ndarray:
-    """4x4 world-from-tag transform of a ``poses.json`` entry."""
-    return rigid_transform(pose["rotation_matrix"], pose["center"])
+__all__ = ["denali_scene", "mount_mesh", "object_mesh", "rig", "scene_at"]
 
 
 def _load_packaged(relpath: str, name: str) -> Mesh:
-    with resources.as_file(_data().joinpath(*relpath.split("/"))) as path:
+    with resources.as_file(data_dir().joinpath(*relpath.split("/"))) as path:
         return load_obj(path, name=name)
-
-
-def _check_object(obj: Any) -> str:
-    name = _ALIASES.get(obj, obj) if isinstance(obj, str) else obj
-    if name not in DENALI_OBJECTS:
-        raise UserError(f"unknown DENALI object {obj!r}; allowed: {', '.join(DENALI_OBJECTS)} ('i' = 'I')")
-    return name
-
-
-def _check_size(size: Any) -> str:
-    if size not in SIZES:
-        raise UserError(f"unknown DENALI object size {size!r}; allowed: {', '.join(SIZES)}")
-    return size
-
-
-def _check_position(position: Any) -> int:
-    if isinstance(position, bool) or not isinstance(position, (int, np.integer)) or not 0 <= position < N_POSITIONS:
-        raise UserError(f"DENALI position={position!r} is not allowed; allowed: integers 0 to {N_POSITIONS - 1}")
-    return int(position)
-
-
-def class_group(obj: str) -> str:
-    """Class group of a DENALI object: ``"numbers"``, ``"letters"`` or ``"shapes"``."""
-    name = _check_object(obj)
-    return next(g for g, names in CLASS_GROUPS.items() if name in names)
 
 
 @lru_cache(maxsize=None)
@@ -128,16 +65,16 @@ def object_mesh(obj: str, size: str) -> Mesh:
     Parameters
     ----------
     obj : str
-        One of :data:`DENALI_OBJECTS` (``"i"`` is accepted for ``"I"``).
+        One of :data:`nlosplan.denali.DENALI_OBJECTS` (``"i"`` is accepted for ``"I"``).
     size : {"4in", "8in"}
 
     Returns
     -------
     Mesh
         The 3D-printed object, 6.6-7.6 mm thick along mesh z; its -z face
-        looks at the relay wall once placed by :func:`object_pose`.
+        looks at the relay wall once placed by :func:`nlosplan.denali.object_pose`.
     """
-    return _object_mesh(_check_object(obj), _check_size(size))
+    return _object_mesh(check_object(obj), check_size(size))
 
 
 @lru_cache(maxsize=None)
@@ -146,52 +83,12 @@ def mount_mesh() -> Mesh:
     return _load_packaged("object_mount.obj", name="object_mount")
 
 
-@lru_cache(maxsize=None)
-def _object_poses() -> np.ndarray:
-    a = -math.pi / 2  # DENALI's y-up to z-up turn about x
-    rx = rigid_transform([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
-    offset = rigid_transform(translation=_MOUNT_OFFSET)
-    poses = _json("poses.json")["tracking_tag1_index_avgposes"]
-    out = np.stack([_tag(poses[str(p)]) @ rx @ offset for p in range(N_POSITIONS)])
-    out.setflags(write=False)
-    return out
-
-
-def object_pose(position: int) -> np.ndarray:
-    """Object-to-world transform at a gantry position.
-
-    Parameters
-    ----------
-    position : int
-        Gantry position index, 0 to 99.
-
-    Returns
-    -------
-    ndarray of float64, shape (4, 4)
-        ``T(tag 1) . Rx(-90 deg) . translate(0, -0.005, -0.04)`` (metres).
-    """
-    return np.array(_object_poses()[_check_position(position)])
-
-
-@lru_cache(maxsize=None)
-def _labels() -> np.ndarray:
-    raw = _json("tag1_positions.json")
-    out = np.array([raw[f"frame{p}_tag1"] for p in range(N_POSITIONS)], dtype=np.float64)
-    out.setflags(write=False)
-    return out
-
-
-def positions_xy() -> np.ndarray:
-    """DENALI's localization labels: world (x, y) of tag 1 per position, shape (100, 2), metres."""
-    return np.array(_labels()[:, :2])
-
-
-def _wall(tags: dict, albedo: float) -> Rect:
-    t5 = _tag(tags["5"])
+def _wall(albedo: float) -> Rect:
+    t5 = tag_pose("5")
     x = t5[:3, 0] / np.linalg.norm(t5[:3, 0])
     y = t5[:3, 1] / np.linalg.norm(t5[:3, 1])
     width, height = WALL_SIZE
-    center = t5[:3, 3] + (width / 2 - _TAG_MARGIN) * x + (height / 2 - _TAG_MARGIN - _WALL_TAG_DROP) * y
+    center = t5[:3, 3] + (width / 2 - WALL_TAG_MARGIN) * x + (height / 2 - WALL_TAG_MARGIN - WALL_TAG_DROP) * y
     lit = -np.cross(x, y)
     # u = x, v = -y gives u x v = -(x x y), the lit normal, with v pointing up in the world
     wall = Rect(center=center, u_axis=x, v_axis=-y, half_u=width / 2, half_v=height / 2,
@@ -201,8 +98,8 @@ def _wall(tags: dict, albedo: float) -> Rect:
     return wall
 
 
-def _table(tags: dict, tag_id: str, albedo: float) -> Rect:
-    t = _tag(tags[tag_id])
+def _table(tag_id: str, albedo: float) -> Rect:
+    t = tag_pose(tag_id)
     x, y = t[:3, 0], t[:3, 1]
     z = -np.cross(x, y)
     sx, sy = TABLE_SIZE
@@ -220,11 +117,10 @@ def _table(tags: dict, tag_id: str, albedo: float) -> Rect:
 
 @lru_cache(maxsize=None)
 def _rig(wall_albedo: float, table_albedo: float, tables: bool) -> tuple[LidarPose, Rect, tuple[Rect, ...]]:
-    cam = _json("cameras.json")["COLOCATED_CAMERA"]
-    lidar = LidarPose.from_opencv(cam["position"], cam["rotation_matrix"])
-    tags = _json("poses.json")["tracking_avgposes"]
-    planes = (_table(tags, "14", table_albedo), _table(tags, "15", table_albedo)) if tables else ()
-    return lidar, _wall(tags, wall_albedo), planes
+    position, rotation = camera_pose()
+    lidar = LidarPose.from_opencv(position, rotation)
+    planes = (_table("14", table_albedo), _table("15", table_albedo)) if tables else ()
+    return lidar, _wall(wall_albedo), planes
 
 
 def rig(*, wall_albedo: float = 0.8, table_albedo: float = 0.5,
@@ -269,7 +165,7 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     Parameters
     ----------
     obj : str
-        One of :data:`DENALI_OBJECTS` (``"i"`` is accepted for ``"I"``).
+        One of :data:`nlosplan.denali.DENALI_OBJECTS` (``"i"`` is accepted for ``"I"``).
     size : {"4in", "8in"}
     position : int
         Gantry position index, 0 to 99.
@@ -303,18 +199,18 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     >>> scene.meta["class_group"]
     'letters'
     """
-    name = _check_object(obj)
-    size = _check_size(size)
-    p = _check_position(position)
+    name = check_object(obj)
+    size = check_size(size)
+    p = check_position(position)
     on = _check_lights(lights)
     lidar, wall, planes = rig(wall_albedo=wall_albedo, table_albedo=table_albedo, tables=tables)
-    pose = _object_poses()[p]
+    pose = object_poses()[p]
     objects = [HiddenObject(mesh=object_mesh(name, size), to_world=pose, reflectance=reflectance,
                             albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}")]
     if mount:
         objects.append(HiddenObject(mesh=mount_mesh(), to_world=pose, reflectance="lambertian",
                                     albedo=0.8, name="object mount"))
-    xy = _labels()[p, :2]
+    xy = tag1_positions()[p, :2]
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": class_group(name),
         "lights": "on" if on else "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": reflectance,
@@ -323,3 +219,27 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     }
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=tuple(objects), lights_on=on,
                  name=f"denali {name}_{size} p{p:02d} lights {meta['lights']}", meta=meta)
+
+
+def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off"):
+    """The DENALI scene with the object at gantry (x, y) mm (any point, not only the grid).
+
+    Parameters
+    ----------
+    obj, size, lights
+        As :func:`denali_scene`.
+    x_mm, y_mm : float
+        Gantry position, millimetres.
+
+    Returns
+    -------
+    Scene
+        ``meta`` has ``position`` (the grid index, or -1 off the grid),
+        ``object_xy`` (:func:`nlosplan.denali.geometry.label_xy`) and ``gantry_mm``.
+    """
+    base = denali_scene(obj, size, 0, lights)
+    pose = object_pose_mm(x_mm, y_mm)
+    meta = {**base.meta, "position": grid_index(x_mm, y_mm), "object_xy": list(label_xy(x_mm, y_mm)),
+            "gantry_mm": [float(x_mm), float(y_mm)]}
+    return base.replace(objects=tuple(o.moved_to(pose) for o in base.objects), meta=meta,
+                        name=f"denali {base.objects[0].name} at ({float(x_mm):.1f}, {float(y_mm):.1f}) mm")
