@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from nlosplan.tasks.dataset import Dataset
+from nlosplan.data.dataset import Dataset
 
 #: Two objects from each DENALI class group.
 OBJECTS = ("1", "7", "A", "S", "circle", "plus")

@@ -14,8 +14,8 @@ from nlosplan.sensor_models import preset
 from nlosplan.simulators import denali_scene
 from nlosplan.simulators.fast.simulator import FastSimulator
 from nlosplan.denali import positions_xy
-from nlosplan.tasks.build import build_dataset, draw_captures, scene_seed
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.build import build_dataset, draw_captures, scene_seed
+from nlosplan.data.store import CaptureStore
 
 SENSOR = preset("tmf8828-3x3-short")
 SMALL = dict(sensor=SENSOR, objects=["A", "circle", "7"], sizes=["4in", "8in"], positions=[0, 1, 2, 3], repeats=2,

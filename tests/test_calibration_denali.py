@@ -170,8 +170,8 @@ def test_cli_on_a_denali_folder_writes_the_calibrated_sensor_and_holdout(cli_run
 
 
 def test_cli_on_a_capture_store_with_a_filter(folder, tmp_path, capsys):
-    from nlosplan.tasks.denali_io import import_denali
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.denali_io import import_denali
+    from nlosplan.data.store import CaptureStore
 
     store = tmp_path / "denali.sqlite"
     with CaptureStore(store, synchronous="NORMAL") as st:

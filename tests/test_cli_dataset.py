@@ -11,7 +11,7 @@ import pytest
 
 from nlosplan.cli import build_parser, main
 from nlosplan.cli.common import EXAMPLES
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.store import CaptureStore
 
 
 def run(capsys, *argv):

@@ -9,8 +9,8 @@ import pytest
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
 from nlosplan.denali import positions_xy
-from nlosplan.tasks.denali_io import export_denali, import_denali, load_positions
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.denali_io import export_denali, import_denali, load_positions
+from nlosplan.data.store import CaptureStore
 
 FOLDERS = {  # folder -> (zones, object, size, class group, lights)
     "A_4inch_3x3_lightoff_NLOSdata": (3, "A", "4in", "letters", "off"),

@@ -206,8 +206,8 @@ def test_report_opens_in_headless_chromium_with_every_image(finished):
 @pytest.mark.slow  # ~25 s: trains on a real-capture store and on simulation
 def test_real_captures_backend_marks_unreachable_designs_and_compares_with_simulation(tmp_path):
     """A store of 3x3 captures as the 'real' backend: 1x1 is a pooling of it, 2x2 is not."""
-    from nlosplan.tasks.build import build_dataset
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.build import build_dataset
+    from nlosplan.data.store import CaptureStore
 
     store = tmp_path / "real.sqlite"
     with CaptureStore(store) as st:

@@ -22,7 +22,7 @@ from nlosplan.sensor_models import preset
 from nlosplan.simulators import denali_scene
 from nlosplan.simulators.fast.simulator import FastSimulator
 from nlosplan.tasks.bounds import localization_crlb_batch
-from nlosplan.tasks.dataset import Dataset
+from nlosplan.data.dataset import Dataset
 from nlosplan.tasks.ideal_observer import ideal_observer
 from nlosplan.tasks.metrics import classification_metrics, regression_metrics
 from nlosplan.tasks.splits import heldout_positions

@@ -12,7 +12,7 @@ from nlosplan.denali.geometry import grid_mm, label_xy, object_pose_mm
 from nlosplan.hardware.plans import ask_tell_plan, finalize_wrapper, positions_plan, raster_plan, read_positions
 from nlosplan.hardware.rig import emulated_rig
 from nlosplan.denali import object_pose, positions_xy
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.store import CaptureStore
 
 CTX = RunContext("A", "8in", source="emulated:rig", plan="test")
 

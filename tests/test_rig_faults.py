@@ -7,7 +7,7 @@ from nlosplan.hardware.executor import Executor, RunContext
 from nlosplan.hardware.grbl import GrblAlarm
 from nlosplan.hardware.plans import raster_plan
 from nlosplan.hardware.rig import emulated_rig
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.store import CaptureStore
 
 CTX = RunContext("A", "8in", source="emulated:rig", plan="faults")
 

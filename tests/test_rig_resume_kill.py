@@ -6,7 +6,7 @@ import subprocess
 import sys
 import time
 
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.store import CaptureStore
 
 
 # ``nlosplan rig`` alone (the rig CLI module's own parser): the whole command would also import torch & co.

@@ -13,7 +13,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
-from nlosplan.tasks.store import SCHEMA_VERSION, CaptureStore, capture_key, sensor_hash
+from nlosplan.data.store import SCHEMA_VERSION, CaptureStore, capture_key, sensor_hash
 
 S3 = preset("tmf8828-3x3-short")
 
@@ -155,7 +155,7 @@ WRITER = r"""
 import sys
 import numpy as np
 from nlosplan.sensor_models import preset
-from nlosplan.tasks.store import CaptureStore, capture_key
+from nlosplan.data.store import CaptureStore, capture_key
 
 path, n = sys.argv[1], int(sys.argv[2])
 sensor = preset("tmf8828-3x3-short")

@@ -16,7 +16,7 @@ from nlosplan.experiments import JitterStudy, load_study_dataset, run_jitter_stu
 from nlosplan.reports.jitter_plot import jitter_markdown, jitter_table, jitter_text, write_jitter
 from nlosplan.sensor_models import preset
 from nlosplan.tasks.benchmark import run_benchmark
-from nlosplan.tasks.store import CaptureStore
+from nlosplan.data.store import CaptureStore
 
 #: A quick study: two levels (none and DENALI's largest), two models, every task.
 STUDY = JitterStudy(jitter_ps=(600, 0), models=("mlp", "cnn1d"), epochs=3, width=0.125)

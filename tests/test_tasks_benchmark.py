@@ -173,7 +173,7 @@ def test_cli_bad_where_is_one_line(fake_store, tmp_path, where, match):
 
 def test_cli_reads_a_real_store_path_error(tmp_path):
     """Without the monkeypatch a missing store is one line (the store room's message)."""
-    pytest.importorskip("nlosplan.tasks.store")
+    pytest.importorskip("nlosplan.data.store")
     args = _parser().parse_args(["benchmark", "--store", str(tmp_path / "none.sqlite"), "--out", str(tmp_path)])
     with pytest.raises(UserError, match="does not exist"):
         args.func(args)

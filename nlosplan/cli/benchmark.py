@@ -13,8 +13,8 @@ from nlosplan.tasks.names import (DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDT
 DEFAULT_OUT = "nlosplan-out/benchmark"
 
 def _load_dataset(store: str, where: dict):
-    """The captures of ``store`` that match ``where`` (a :class:`~nlosplan.tasks.dataset.Dataset`)."""
-    from nlosplan.tasks.store import CaptureStore
+    """The captures of ``store`` that match ``where`` (a :class:`~nlosplan.data.dataset.Dataset`)."""
+    from nlosplan.data.store import CaptureStore
 
     with CaptureStore(store, create=False) as st:
         return st.load(**where)

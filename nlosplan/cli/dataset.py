@@ -13,7 +13,7 @@ from nlosplan.cli.common import command_group, emit, int_type, note, progress_ba
 def _objects(text: str) -> list[str]:
     """``all``, or DENALI objects and class groups separated by commas (``i``, ``halfcircle`` accepted)."""
     from nlosplan.denali import CLASS_GROUPS, DENALI_OBJECTS
-    from nlosplan.tasks.denali_io import OBJECT_ALIASES
+    from nlosplan.data.denali_io import OBJECT_ALIASES
 
     out: list[str] = []
     for tok in (t.strip() for t in text.split(",")):
@@ -84,7 +84,7 @@ def _progress(args, desc: str, unit: str):
 
 
 def _store(args, *, create: bool, synchronous: str = "FULL"):
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.store import CaptureStore
 
     return CaptureStore(args.store, create=create, synchronous=synchronous)
 
@@ -93,7 +93,7 @@ def _store(args, *, create: bool, synchronous: str = "FULL"):
 def _cmd_build(args) -> int:
     from nlosplan.cli.simulate import _with_warning_lines
     from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.tasks.build import build_dataset
+    from nlosplan.data.build import build_dataset
 
     sensor = resolve_sensor(args.sensor)
     with _store(args, create=True, synchronous="FULL" if args.fsync else "NORMAL") as store:
@@ -125,7 +125,7 @@ def _skipped_lines(skipped: list[dict], limit: int = 20) -> list[str]:
 
 def _cmd_import(args) -> int:
     from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.tasks.denali_io import import_denali
+    from nlosplan.data.denali_io import import_denali
 
     sensors = [resolve_sensor(s) for s in args.sensor or ()]
     with _store(args, create=True) as store, _progress(args, "import DENALI", "file") as progress:
@@ -147,7 +147,7 @@ def _where(args) -> dict:
 
 
 def _cmd_export(args) -> int:
-    from nlosplan.tasks.denali_io import export_denali
+    from nlosplan.data.denali_io import export_denali
 
     with _store(args, create=False) as store, _progress(args, "export DENALI", "file") as progress:
         res = export_denali(store, args.out, overwrite=args.overwrite, progress=progress, **_where(args))

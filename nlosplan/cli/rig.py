@@ -214,7 +214,7 @@ def _cmd_capture(args) -> int:
     from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
     from nlosplan.hardware.tmf8828 import SensorError
     from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.store import CaptureStore
 
     if not args.emulate and not (args.lidar and args.gantry):
         raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
@@ -288,7 +288,7 @@ def _open(args):
 
 def _cmd_status(args) -> int:
     from nlosplan.hardware.status import run_status
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.store import CaptureStore
 
     with CaptureStore(args.store, create=False) as store:
         rows = run_status(store, args.run)

@@ -73,7 +73,7 @@ def _cmd(args) -> int:
     from nlosplan.planner.capture import (CapturePlanner, MotionModel, PlannerConfig, build_space, denali_scene_fn,
                                           grid_points, screen_candidates)
     from nlosplan.planner.capture.closed_loop import ClosedLoop
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.store import CaptureStore
 
     if not args.emulate and not (args.lidar and args.gantry):
         raise UserError("give --lidar PORT and --gantry PORT, or --emulate")

@@ -69,8 +69,8 @@ def _reporter(args):
 
 
 def _import_denali(args, store: Path) -> None:
-    from nlosplan.tasks.denali_io import import_denali
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.denali_io import import_denali
+    from nlosplan.data.store import CaptureStore
 
     note(args, f"importing DENALI folder {args.denali} into {store} (resumable) ...")
     with CaptureStore(store, create=True, synchronous="NORMAL") as st:

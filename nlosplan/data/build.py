@@ -5,7 +5,7 @@ through one :class:`~nlosplan.simulators.fast.simulator.FastSimulator` (one
 compiled program per batch shape, shared between groups); each scene then
 gets ``repeats`` Poisson captures drawn with its own seed, derived from
 ``(seed, object, size, position, lights)`` alone. Every capture is committed
-on its own (:meth:`~nlosplan.tasks.store.CaptureStore.put_many`), so an
+on its own (:meth:`~nlosplan.data.store.CaptureStore.put_many`), so an
 interrupted build keeps what it stored, and a rerun with the same arguments
 skips complete groups and batches and gives the same counts.
 
@@ -42,8 +42,8 @@ from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
 from nlosplan.simulators.presets.denali import denali_scene
 from nlosplan.simulators.scene import NLOSWarning
-from nlosplan.tasks.denali_io import OBJECT_ALIASES
-from nlosplan.tasks.records import capture_key, sensor_hash, zones_of
+from nlosplan.data.denali_io import OBJECT_ALIASES
+from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
 __all__ = ["SCENES", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
 

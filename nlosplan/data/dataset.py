@@ -1,6 +1,6 @@
 """`Dataset`: histograms with their labels, in memory (the currency of the task room).
 
-A dataset comes from a :class:`~nlosplan.tasks.store.CaptureStore` (simulated
+A dataset comes from a :class:`~nlosplan.data.store.CaptureStore` (simulated
 or real captures) and goes to the models, the metrics and the studies. Rows
 are captures (or the mean of a capture's repeats); labels are a pandas table.
 

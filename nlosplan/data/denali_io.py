@@ -32,7 +32,7 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.denali import DENALI_OBJECTS, class_group
-from nlosplan.tasks.records import capture_key, sensor_hash, zones_of
+from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
 __all__ = ["BACKGROUNDS", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.tasks.dataset import LABEL_COLUMNS
+from nlosplan.data.dataset import LABEL_COLUMNS
 
 __all__ = ["APPLICATION_ID", "Added", "Capture", "FILTER_COLUMNS", "SCHEMA", "SCHEMA_VERSION", "capture_key",
            "capture_row", "sensor_hash", "sensor_row", "where_sql"]
@@ -122,7 +122,7 @@ def _json_default(value):
 
 
 class Added(NamedTuple):
-    """What :meth:`~nlosplan.tasks.store.CaptureStore.put_many` did.
+    """What :meth:`~nlosplan.data.store.CaptureStore.put_many` did.
 
     ``ids`` of every item in order (the stored capture's id for an item that
     was there already), and how many were ``added`` or ``skipped``.
@@ -135,7 +135,7 @@ class Added(NamedTuple):
 
 @dataclass(frozen=True)
 class Capture:
-    """One stored capture (see :meth:`~nlosplan.tasks.store.CaptureStore.iter_captures`).
+    """One stored capture (see :meth:`~nlosplan.data.store.CaptureStore.iter_captures`).
 
     Attributes
     ----------

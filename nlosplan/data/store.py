@@ -1,9 +1,9 @@
 """`CaptureStore`: simulated and real captures in one SQLite file (WAL mode).
 
-One row per capture: its labels (the :data:`~nlosplan.tasks.dataset.LABEL_COLUMNS`),
+One row per capture: its labels (the :data:`~nlosplan.data.dataset.LABEL_COLUMNS`),
 its metadata and its histogram as raw little-endian bytes. The rig, the
 simulated-dataset builder and the DENALI importer all write here; the models
-read :class:`~nlosplan.tasks.dataset.Dataset` objects back with :meth:`CaptureStore.load`.
+read :class:`~nlosplan.data.dataset.Dataset` objects back with :meth:`CaptureStore.load`.
 
 Crash safety
 ------------
@@ -43,8 +43,8 @@ import pandas as pd
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.tasks.dataset import LABEL_COLUMNS, Dataset
-from nlosplan.tasks.records import (
+from nlosplan.data.dataset import LABEL_COLUMNS, Dataset
+from nlosplan.data.records import (
     APPLICATION_ID,
     DTYPES,
     FILTER_COLUMNS,

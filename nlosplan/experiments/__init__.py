@@ -2,7 +2,7 @@
 
 A study states *what* to vary and *what* to measure; the runner only
 composes the rooms that own the work (datasets and jitter from
-:mod:`nlosplan.tasks.dataset`, training and metrics from
+:mod:`nlosplan.data.dataset`, training and metrics from
 :mod:`nlosplan.tasks.benchmark`) and records the settings and timings. The
 reports room turns a study's result into tables and figures.
 

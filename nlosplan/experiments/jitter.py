@@ -11,8 +11,8 @@ MAE, metres), 30-way shape (top-1, top-5, macro F1) and 4 in vs 8 in size
 (accuracy, precision, recall).
 
 This module only composes the rooms that own the work:
-:meth:`Dataset.centre_zone <nlosplan.tasks.dataset.Dataset.centre_zone>`,
-:meth:`Dataset.with_jitter <nlosplan.tasks.dataset.Dataset.with_jitter>`
+:meth:`Dataset.centre_zone <nlosplan.data.dataset.Dataset.centre_zone>`,
+:meth:`Dataset.with_jitter <nlosplan.data.dataset.Dataset.with_jitter>`
 (exact re-binning of each bin through the Gaussian) and
 :func:`~nlosplan.tasks.benchmark.run_benchmark` (split, training, metrics
 and breakdowns). Jitter is linear, so blurring each capture and then
@@ -40,7 +40,8 @@ from typing import Callable
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.tasks.dataset import Dataset, scene_keys
+from nlosplan.data.dataset import Dataset, scene_keys
+from nlosplan.data.load import load_dataset
 from nlosplan.tasks.names import DEFAULT_PATIENCE, DEFAULT_WIDTH, MODEL_NAMES, PROFILES, SMALL, SPLITS, TASKS, check_names
 
 __all__ = ["DEFAULT_JITTER_PS", "DEFAULT_MODELS", "STUDY_ZONES", "ZONE_VIEWS", "JitterStudy", "level_summary",
@@ -169,14 +170,14 @@ class JitterStudy:
 
 
 def load_study_dataset(store, where: dict | None = None, *, drop_backgrounds: bool = True) -> Dataset:
-    """The captures of a store the jitter study can use.
+    """The captures of a store the jitter study can use (:func:`~nlosplan.data.load.load_dataset`).
 
     Parameters
     ----------
     store : str or Path
-        A :class:`~nlosplan.tasks.store.CaptureStore` file (not created).
+        A :class:`~nlosplan.data.store.CaptureStore` file (not created).
     where : dict, optional
-        Label filter as :meth:`CaptureStore.load <nlosplan.tasks.store.CaptureStore.load>`
+        Label filter as :meth:`CaptureStore.load <nlosplan.data.store.CaptureStore.load>`
         takes it (a value may be a list). Without a ``zones`` entry the
         study's zone mode :data:`STUDY_ZONES` (3x3) is used.
     drop_backgrounds : bool
@@ -195,26 +196,10 @@ def load_study_dataset(store, where: dict | None = None, *, drop_backgrounds: bo
         message lists the modes it has), nothing matches the filter, or only
         backgrounds match.
     """
-    from nlosplan.tasks.records import describe
-    from nlosplan.tasks.store import CaptureStore
-
-    where = dict(where or {})
-    where.setdefault("zones", STUDY_ZONES)
-    with CaptureStore(store, create=False) as st:
-        if st.count(zones=where["zones"]) == 0:
-            modes = sorted(st.labels()["zones"].astype(str).unique())
-            have = f"it holds {', '.join(modes)} captures" if modes else "it is empty"
-            raise UserError(f"capture store {store} has no {where['zones']} captures ({have}); the jitter study "
-                            f"uses the centre zone of {STUDY_ZONES} captures (an odd zone grid): build or import "
-                            f"{STUDY_ZONES} captures, or pass zones= with an odd grid in the filter")
-        if st.count(**where) == 0:
-            raise UserError(f"no captures in {store} match {describe(where)}")
-        ds = st.load(**where)
-    if drop_backgrounds:
-        ds = ds.take(ds.labels["class_group"].astype(str).to_numpy() != "background")
-        if len(ds) == 0:
-            raise UserError(f"only background captures (no object) in {store} match {describe(where)}")
-    return ds
+    return load_dataset(store, where, default_zones=STUDY_ZONES, drop_backgrounds=drop_backgrounds,
+                        zones_hint=f"the jitter study uses the centre zone of {STUDY_ZONES} captures (an odd zone "
+                                   f"grid): build or import {STUDY_ZONES} captures, or pass zones= with an odd grid "
+                                   "in the filter")
 
 
 def _check_grid(dataset: Dataset, zone: str) -> None:

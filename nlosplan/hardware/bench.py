@@ -36,7 +36,7 @@ def _frames(zones: ZoneMode, n: int, rng) -> list[list[str]]:
 
 def _per_frame(zones: ZoneMode, n: int, store_path: str, synchronous: str, rng) -> dict:
     from nlosplan.hardware.rig import sensor_preset
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.store import CaptureStore
 
     sensor = sensor_preset(zones.value, "short")
     frames = _frames(zones, n, rng)

@@ -4,7 +4,7 @@ Executor (STYLE.md 1)
 ---------------------
 :class:`Executor` drives a plan generator (:mod:`~nlosplan.hardware.commands`)
 against a :class:`~nlosplan.hardware.rig.Rig` and a
-:class:`~nlosplan.tasks.store.CaptureStore`:
+:class:`~nlosplan.data.store.CaptureStore`:
 
 - ``Move`` and ``SetLights`` are lazy: the gantry moves and the lights change
   right before the next capture that is actually taken.
@@ -250,7 +250,7 @@ class Executor:
         return labels
 
     def _capture(self, cmd: Capture) -> CaptureResult:
-        from nlosplan.tasks.records import capture_key
+        from nlosplan.data.records import capture_key
 
         if self._target is None:
             raise UserError("the plan asked for a capture before any Move")

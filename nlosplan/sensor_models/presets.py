@@ -159,8 +159,11 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
-def resolve_sensor(spec: str) -> SensorConfig:
-    """A preset name or a path to a ``.toml``/``.json`` sensor file."""
+def resolve_sensor(spec) -> SensorConfig:
+    """A preset name or a path to a ``.toml``/``.json`` sensor file (a :class:`SensorConfig` is returned as it is)."""
+    if isinstance(spec, SensorConfig):
+        return spec
+    spec = str(spec)
     if spec.endswith((".toml", ".json")):
         return SensorConfig.load(spec)
     return preset(spec)

@@ -1,7 +1,7 @@
 """The DENALI benchmark table: one model per (architecture, task), trained, tested and broken down.
 
 :func:`run_benchmark` trains every requested model on every requested task
-on one split of a :class:`~nlosplan.tasks.dataset.Dataset`, evaluates the
+on one split of a :class:`~nlosplan.data.dataset.Dataset`, evaluates the
 metrics and breakdowns of :mod:`nlosplan.tasks.metrics` on the test rows and
 records each model's training time. The result is tidy (one row per model,
 task, metric and group) so that pandas pivots it into the paper's layout
@@ -28,7 +28,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.tasks.dataset import Dataset
+from nlosplan.data.dataset import Dataset
 from nlosplan.tasks.metrics import BREAKDOWNS, breakdown_rows, position_quadrants
 from nlosplan.tasks.models import MODEL_NAMES, TASK_LABEL, TASKS, check_names, n_parameters
 from nlosplan.tasks.splits import SPLITS, make_split, split_applies

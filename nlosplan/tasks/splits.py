@@ -1,4 +1,4 @@
-"""Train/test splits of a :class:`~nlosplan.tasks.dataset.Dataset`, as DENALI's benchmark makes them.
+"""Train/test splits of a :class:`~nlosplan.data.dataset.Dataset`, as DENALI's benchmark makes them.
 
 Random splits (``benchmark/main_table/data.py``)
     70/30, ``random_state=42``, sklearn ``train_test_split``: plain for
@@ -26,7 +26,7 @@ import pandas as pd
 from sklearn.model_selection import train_test_split
 
 from nlosplan.errors import UserError
-from nlosplan.tasks.dataset import Dataset, scene_keys
+from nlosplan.data.dataset import Dataset, scene_keys
 from nlosplan.tasks.names import SPLITS, TASK_LABEL, TASKS  # noqa: F401 (SPLITS re-exported)
 
 __all__ = ["SPLITS", "Split", "heldout_objects", "heldout_positions", "heldout_sizes", "make_split",

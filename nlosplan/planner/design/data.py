@@ -247,7 +247,7 @@ def reference_from_dataset(dataset, sensor: SensorConfig, source: str) -> Refere
 
     Parameters
     ----------
-    dataset : nlosplan.tasks.dataset.Dataset
+    dataset : nlosplan.data.dataset.Dataset
         Counts (N, R, C, B) with labels.
     sensor : SensorConfig
         The sensor that captured them (its zones and bins must match the histograms).

@@ -119,7 +119,7 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     import torch
 
     from nlosplan.tasks.benchmark import train_config
-    from nlosplan.tasks.dataset import Dataset
+    from nlosplan.data.dataset import Dataset
     from nlosplan.tasks.models import TASK_LABEL
     from nlosplan.tasks.splits import make_split
     from nlosplan.tasks.training import train_model

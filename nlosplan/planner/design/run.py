@@ -22,6 +22,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from nlosplan.data.load import load_dataset
 from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, reference_from_dataset, simulate_reference
@@ -32,6 +33,7 @@ from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requireme
 from nlosplan.planner.design.search import DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
+from nlosplan.sensor_models import resolve_sensor
 
 __all__ = ["DesignConfig", "run_design", "read_evaluations", "CHECKPOINT", "EVALUATIONS"]
 
@@ -192,12 +194,10 @@ def _references(cfg: DesignConfig, out: Path, say) -> tuple[dict, dict, dict]:
         info[f"{z[0]}x{z[1]}"] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
                                    "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
     if cfg.real:
-        from nlosplan.experiments.jitter import load_study_dataset
-        from nlosplan.planner.design.space import _load_reference
-
-        captured = _load_reference(cfg.capture_sensor or space.reference)
-        ds = load_study_dataset(cfg.real, {**(cfg.real_where or {}),
-                                           "zones": f"{captured.zones_rows}x{captured.zones_cols}"})
+        captured = resolve_sensor(cfg.capture_sensor or space.reference)
+        ds = load_dataset(cfg.real, {**(cfg.real_where or {}), "zones": f"{captured.zones_rows}x{captured.zones_cols}"},
+                          drop_backgrounds=True, zones_hint="the real captures must have the capture sensor's zones "
+                                                            "(give the matching --capture-sensor)")
         ref = reference_from_dataset(ds, captured, str(cfg.real))
         path = out / "reference" / f"real_{hashlib.sha1(str(cfg.real).encode()).hexdigest()[:8]}.npz"
         ref.save(path)

@@ -19,7 +19,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 
 from nlosplan.errors import UserError
-from nlosplan.sensor_models import SensorConfig, preset
+from nlosplan.sensor_models import SensorConfig, resolve_sensor
 
 __all__ = ["AXES", "Design", "DesignSpace", "parse_zones"]
 
@@ -186,7 +186,7 @@ class DesignSpace:
         bad = [a for a in self.axes if a not in AXES]
         if bad:
             raise UserError(f"unknown design axis {', '.join(bad)}; allowed: {', '.join(AXES)}")
-        sensor = self._sensor or _load_reference(self.reference)
+        sensor = self._sensor or resolve_sensor(self.reference)
         object.__setattr__(self, "_sensor", sensor)
         if self.n_bins[1] > sensor.n_bins:
             raise UserError(f"n_bins up to {self.n_bins[1]} exceeds the reference's {sensor.n_bins} bins")
@@ -238,11 +238,3 @@ class DesignSpace:
         kw = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**kw, _sensor=sensor)
 
-
-def _load_reference(ref) -> SensorConfig:
-    if isinstance(ref, SensorConfig):
-        return ref
-    text = str(ref)
-    if text.endswith((".toml", ".json")):
-        return SensorConfig.load(text)
-    return preset(text)

@@ -3,8 +3,8 @@
 Inputs are real (or simulated) histograms in DENALI's folder layout
 (``<object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy``,
 ``NNN`` the gantry position, shape ``(repeats, H, W, 128)``; parsed by
-:func:`~nlosplan.tasks.denali_io.import_denali` into a temporary capture
-store) or a :class:`~nlosplan.tasks.store.CaptureStore` file with an
+:func:`~nlosplan.data.denali_io.import_denali` into a temporary capture
+store) or a :class:`~nlosplan.data.store.CaptureStore` file with an
 optional label filter (:func:`load_denali_captures`). Every repeat is one
 capture of the fit.
 
@@ -143,10 +143,10 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
     ----------
     path : str or Path
         A folder holding ``*_NLOSdata`` folders (read through
-        :func:`~nlosplan.tasks.denali_io.import_denali` into a temporary store),
+        :func:`~nlosplan.data.denali_io.import_denali` into a temporary store),
         or a capture store file (``nlosplan dataset import-denali`` or ``dataset build``).
     where : dict, optional
-        Label filter as :meth:`~nlosplan.tasks.store.CaptureStore.load` takes it
+        Label filter as :meth:`~nlosplan.data.store.CaptureStore.load` takes it
         (``{"lights": "off", "object": ["A", "NOOBJECT"]}``). Means over repeats
         (``repeat < 0``) are always left out: they are not Poisson counts.
     positions_json : str or Path, optional
@@ -164,8 +164,8 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
         Not a DENALI-layout folder nor a store; nothing matches; the captures
         mix zone modes (or bin widths).
     """
-    from nlosplan.tasks.denali_io import import_denali
-    from nlosplan.tasks.store import CaptureStore
+    from nlosplan.data.denali_io import import_denali
+    from nlosplan.data.store import CaptureStore
 
     path = Path(path)
     if path.is_dir():
@@ -186,7 +186,7 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
 
 
 def _from_store(st, where: dict | None, origin: str) -> DenaliCaptures:
-    from nlosplan.tasks.records import describe
+    from nlosplan.data.records import describe
 
     where = dict(where or {})
     labels = st.labels(**where)
