@@ -5,7 +5,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig
-from nlosplan.sensor_models.calibration import CaptureSet, calibrated_sensor, fit_calibration, usable_zones
+from nlosplan.calibration import CaptureSet, calibrated_sensor, fit_calibration, usable_zones
 from nlosplan.sensor_models.pipeline import expected_histogram
 from nlosplan.simulators import WallScene, wall_arrivals
 
@@ -136,7 +136,7 @@ def _jittered_captures(offset_sd_ps, seed=1):
 
 
 def test_bootstrap_agrees_with_fisher_when_the_model_is_right(simulated, recovered):
-    from nlosplan.sensor_models.calibration import bootstrap_errors
+    from nlosplan.calibration import bootstrap_errors
 
     seen = []
     b = bootstrap_errors(simulated, recovered, resamples=10, seed=3, progress=lambda i, n: seen.append((i, n)))
@@ -152,7 +152,7 @@ def test_bootstrap_agrees_with_fisher_when_the_model_is_right(simulated, recover
 
 @pytest.mark.slow  # ~20 s: a full fit and 10 refits
 def test_bootstrap_sees_what_fisher_cannot_a_time_base_wandering_between_captures():
-    from nlosplan.sensor_models.calibration import bootstrap_errors
+    from nlosplan.calibration import bootstrap_errors
 
     cs = _jittered_captures(offset_sd_ps=6.0)
     start = {"bin_width_ps": 94.0, "start_offset_ps": -1100.0, "pulse_fwhm_ps": 150.0}
@@ -166,7 +166,7 @@ def test_bootstrap_sees_what_fisher_cannot_a_time_base_wandering_between_capture
 
 
 def test_bootstrap_refuses_too_few_resamples_or_captures(simulated, recovered):
-    from nlosplan.sensor_models.calibration import bootstrap_errors
+    from nlosplan.calibration import bootstrap_errors
 
     with pytest.raises(UserError, match="at least 5"):
         bootstrap_errors(simulated, recovered, resamples=3)

@@ -10,15 +10,15 @@ import pytest
 
 from nlosplan.cli import main
 from nlosplan.sensor_models import preset, resolve_sensor
-from nlosplan.sensor_models.calibration import (
+from nlosplan.calibration import (
     CaptureSet,
     denali_capture_set,
     load_denali_captures,
     make_model,
     scene_arrivals,
 )
-from nlosplan.sensor_models.calibration.denali import quiet_floors, split_positions
-from nlosplan.sensor_models.calibration.denali_data import matching_scene, wall_zones
+from nlosplan.calibration.denali import quiet_floors, split_positions
+from nlosplan.calibration.denali_data import matching_scene, wall_zones
 from nlosplan.simulators import FastSimulator
 
 ITERS = 550_000

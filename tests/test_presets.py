@@ -7,7 +7,7 @@ import pytest
 
 from nlosplan.sensor_models import PRESET_NAMES, expected_histogram, preset
 from nlosplan.sensor_models.presets import MEASURED
-from nlosplan.sensor_models.tmf882x_fit import fit_timebase, load_distance_captures
+from nlosplan.calibration.tmf882x_fit import fit_timebase, load_distance_captures
 from nlosplan.simulators import WallScene, wall_arrivals
 
 

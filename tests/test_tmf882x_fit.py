@@ -10,7 +10,7 @@ import pytest
 from nlosplan.constants import C_M_PER_PS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.pipeline import bin_arrivals
-from nlosplan.sensor_models.tmf882x_fit import (
+from nlosplan.calibration.tmf882x_fit import (
     DistanceCaptures,
     fit_pulse_shape,
     fit_timebase,

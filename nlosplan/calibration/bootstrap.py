@@ -18,14 +18,14 @@ import numpy as np
 
 from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.fit import (
+from nlosplan.calibration.fit import (
     CalibrationFit,
     _deviance_fn,
     _minimize,
     _theta_of_z,
     floor_counts,
 )
-from nlosplan.sensor_models.calibration.model import PARAM_NAMES, CaptureSet, make_model
+from nlosplan.calibration.model import PARAM_NAMES, CaptureSet, make_model
 
 #: Fewest resamples that give a meaningful spread.
 MIN_RESAMPLES = 5

@@ -21,7 +21,7 @@ import numpy as np
 from nlosplan._jax import jax, jnp
 from nlosplan.constants import FWHM_PER_SIGMA
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.fit import (
+from nlosplan.calibration.fit import (
     FLOOR_BINS,
     CalibrationFit,
     ZoneScores,
@@ -30,8 +30,8 @@ from nlosplan.sensor_models.calibration.fit import (
     usable_zones,
     zone_scores,
 )
-from nlosplan.sensor_models.calibration.model import PARAM_NAMES, CaptureSet, make_model, poisson_deviance
-from nlosplan.sensor_models.calibration.plane import calibrated_sensor
+from nlosplan.calibration.model import PARAM_NAMES, CaptureSet, make_model, poisson_deviance
+from nlosplan.calibration.plane import calibrated_sensor
 from nlosplan.sensor_models.config import SensorConfig
 
 __all__ = ["MIN_QUIET_BINS", "PULSES", "QUIET_COUNTS", "QUIET_SIGMAS", "DenaliHoldout", "calibrated_denali_sensor",
@@ -84,7 +84,7 @@ def pulse_model(sensor: SensorConfig, pulse: str | None = None) -> tuple:
 
 def _scan_offset(cs: CaptureSet, used: np.ndarray, start: dict, shape, step, t0, noise: str) -> float:
     """The start offset (ps) that best explains a few captures, on a grid of ``OFFSET_SCAN_STEP`` bins."""
-    from nlosplan.sensor_models.calibration.model import PARAMS
+    from nlosplan.calibration.model import PARAMS
 
     rows = np.flatnonzero(used.any(axis=1))
     rows = rows[np.unique(np.linspace(0, rows.size - 1, min(OFFSET_SCAN_CAPTURES, rows.size)).round().astype(int))]
@@ -126,12 +126,12 @@ def quiet_floors(cs: CaptureSet, values: dict, pulse_shape=None, pulse_step_ps: 
     values : dict
         Parameters by name (physical units), e.g. ``fit.values`` or a start.
     pulse_shape, pulse_step_ps, pulse_t0_ps
-        As :func:`~nlosplan.sensor_models.calibration.model.make_model`.
+        As :func:`~nlosplan.calibration.model.make_model`.
     groups : sequence of length N, optional
         Captures sharing a floor, e.g. :meth:`~.denali_data.DenaliCaptures.floor_groups`
         (one DENALI folder: object, size, lights); default: each capture alone.
     """
-    from nlosplan.sensor_models.calibration.model import PARAMS
+    from nlosplan.calibration.model import PARAMS
 
     model = make_model(cs, pulse_shape, pulse_step_ps, pulse_t0_ps, values["bin_width_ps"], values["start_offset_ps"])
     fwhm = min(3.0 * values["pulse_fwhm_ps"], PARAMS[PARAM_NAMES.index("pulse_fwhm_ps")].hi)
@@ -163,7 +163,7 @@ def fit_denali(cs: CaptureSet, sensor: SensorConfig, *, steps=("scale", "pulse",
     sensor : SensorConfig
         Start values: its bin width and offset; its pulse shape with ``pulse="shape"``.
     steps : sequence of {"scale", "pulse", "noise"}
-        As :func:`~nlosplan.sensor_models.calibration.fit.fit_calibration`.
+        As :func:`~nlosplan.calibration.fit.fit_calibration`.
     noise : {"measured", "global"}
         Each capture zone's own floor (:func:`quiet_floors` under the start
         values; not fitted) or one fitted level.

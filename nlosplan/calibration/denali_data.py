@@ -42,10 +42,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nlosplan.calibration.model import CaptureSet
 from nlosplan.constants import C_M_PER_PS
+from nlosplan.data.denali_io import import_denali
+from nlosplan.data.records import describe
+from nlosplan.data.store import CaptureStore
+from nlosplan.denali import DENALI_OBJECTS
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.model import CaptureSet
 from nlosplan.sensor_models.config import MAX_BINS, SensorConfig
+from nlosplan.simulators.fast.fidelity import resolve_fidelity
+from nlosplan.simulators.fast.geometry import direct_returns
+from nlosplan.simulators.fast.simulator import FastSimulator
+from nlosplan.simulators.presets.denali import denali_scene
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -164,9 +172,6 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
         Not a DENALI-layout folder nor a store; nothing matches; the captures
         mix zone modes (or bin widths).
     """
-    from nlosplan.data.denali_io import import_denali
-    from nlosplan.data.store import CaptureStore
-
     path = Path(path)
     if path.is_dir():
         with tempfile.TemporaryDirectory(prefix="nlosplan-calibrate-") as tmp:
@@ -186,8 +191,6 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
 
 
 def _from_store(st, where: dict | None, origin: str) -> DenaliCaptures:
-    from nlosplan.data.records import describe
-
     where = dict(where or {})
     labels = st.labels(**where)
     labels = labels[labels["repeat"] >= 0]
@@ -223,9 +226,6 @@ def matching_scene(obj: str, size: str, position: int, lights="off", **options):
     -------
     Scene
     """
-    from nlosplan.denali import DENALI_OBJECTS
-    from nlosplan.simulators.presets.denali import denali_scene
-
     if obj == "NOOBJECT":
         return denali_scene(DENALI_OBJECTS[0], size, position, lights, **options).without_objects()
     if obj == "NOOBJECTMOUNT":  # the preset's mount (pose and albedo), without the object it holds
@@ -281,15 +281,11 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
     Notes
     -----
     Matches the fast simulator: with these arrivals,
-    :func:`~nlosplan.sensor_models.calibration.model.make_model` at a
+    :func:`~nlosplan.calibration.model.make_model` at a
     sensor's parameters gives its expected counts
     (``FastSimulator(scene, sensor).expected()``) to well under 1 % where
     the wall return shows.
     """
-    from nlosplan.simulators.fast.fidelity import resolve_fidelity
-    from nlosplan.simulators.fast.geometry import direct_returns
-    from nlosplan.simulators.fast.simulator import FastSimulator
-
     keys = [(str(o), str(s), int(p)) for o, s, p in keys]
     if not keys:
         raise UserError("no scenes to simulate")
@@ -330,9 +326,6 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
 
 def wall_zones(sensor: SensorConfig, *, fidelity="default", scene_options: dict | None = None) -> list[int]:
     """Flat indices of the zones that see the relay wall (some sub-ray's first hit is on it)."""
-    from nlosplan.simulators.fast.fidelity import resolve_fidelity
-    from nlosplan.simulators.fast.geometry import direct_returns
-
     rig = matching_scene("NOOBJECT", "8in", 0, **dict(scene_options or {}))
     _, w, plane = direct_returns(rig.lidar, (rig.wall, *rig.planes), sensor, resolve_fidelity(fidelity).zone_sub)
     return [int(z) for z in np.flatnonzero(np.any((plane == 0) & (w > 0), axis=1))]

@@ -25,7 +25,7 @@ import numpy as np
 from nlosplan._jax import jax, jnp
 from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.model import PARAM_NAMES, PARAMS, STEPS, CaptureSet, make_model
+from nlosplan.calibration.model import PARAM_NAMES, PARAMS, STEPS, CaptureSet, make_model
 
 #: A zone's net peak (counts above its floor) below this is "no signal".
 MIN_NET_PEAK = 100.0

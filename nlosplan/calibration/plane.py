@@ -5,9 +5,9 @@ distance; its arrivals come from the caller (``arrivals(distance_m) ->
 (times_ps (Z, K), weights (Z, K))``, e.g. :func:`nlosplan.simulators.wall_arrivals`),
 so this module stays on the sensor side. Start values come from the fitting
 part only: the time base from half-maximum leading edges
-(:func:`~nlosplan.sensor_models.tmf882x_fit.fit_timebase`) and, with
+(:func:`~nlosplan.calibration.tmf882x_fit.fit_timebase`) and, with
 ``pulse="shape"``, the non-parametric pulse
-(:func:`~nlosplan.sensor_models.tmf882x_fit.fit_pulse_shape`).
+(:func:`~nlosplan.calibration.tmf882x_fit.fit_pulse_shape`).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.calibration.fit import CalibrationFit, fit_calibration, usable_zones, zone_scores
-from nlosplan.sensor_models.calibration.model import CaptureSet
+from nlosplan.calibration.fit import CalibrationFit, fit_calibration, usable_zones, zone_scores
+from nlosplan.calibration.model import CaptureSet
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
+from nlosplan.calibration.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
 
 PULSES = ("shape", "gaussian")
 

@@ -1,6 +1,6 @@
 """One-call time-base report for ``nlosplan sensor fit-timebase``.
 
-Runs :mod:`nlosplan.sensor_models.tmf882x_fit` on a file of plane-at-distance
+Runs :mod:`nlosplan.calibration.tmf882x_fit` on a file of plane-at-distance
 captures: the time base and pulse shape on every usable capture, and a
 seeded fit/held-out split for honest errors. Returns plain data.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from nlosplan.sensor_models.tmf882x_fit import fit_pulse_shape, fit_timebase, holdout_report, load_distance_captures
+from nlosplan.calibration.tmf882x_fit import fit_pulse_shape, fit_timebase, holdout_report, load_distance_captures
 
 
 def fit_report(path, *, zone: int = 4, min_distance_m: float = 0.06, seed: int = 0) -> dict:

@@ -88,16 +88,31 @@ def _steps(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def _bootstrap(args, cs_fit, fit, noise):
-    """Bootstrap errors of ``fit`` on its own captures when --bootstrap asks for them (None otherwise)."""
+def _bootstrap(args, cal):
+    """Bootstrap errors of the calibration when --bootstrap asks for them (None otherwise)."""
     if not args.bootstrap:
         return None
-    from nlosplan.sensor_models.calibration import bootstrap_errors
-
-    note(args, f"bootstrap: refitting on {args.bootstrap} resamples of {len(cs_fit.labels)} captures ...")
+    note(args, f"bootstrap: refitting on {args.bootstrap} resamples of {len(cal.fit_captures.labels)} captures ...")
     with progress_bar(args, args.bootstrap, "bootstrap", "refit") as bar:
-        return bootstrap_errors(cs_fit, fit, resamples=args.bootstrap, seed=args.seed, noise=noise,
-                                progress=None if bar is None else (lambda done, total: bar.update(1)))
+        return cal.bootstrap(args.bootstrap, args.seed,
+                             progress=None if bar is None else (lambda done, total: bar.update(1)))
+
+
+def _write(args, cal) -> dict:
+    """The calibrated sensor file (--out) and the residual plot (--plot), as {kind: path}."""
+    files = {}
+    if args.out:
+        cal.sensor.save(args.out)
+        files["sensor"] = str(args.out)
+    if args.plot:
+        from nlosplan.reports.calibration_plot import plot_calibration
+
+        cs, pred = cal.captures, cal.predicted()
+        path = plot_calibration(cs.counts.reshape(-1, cs.counts.shape[-1]), pred.reshape(-1, pred.shape[-1]),
+                                [f"{lab} z{z}" for lab in cs.labels for z in cal.zones], args.plot,
+                                title=f"{cal.base.name} calibrated on {args.captures}")
+        files["plot"] = str(path)
+    return files
 
 
 def _parameter_lines(fit, boot) -> list[str]:
@@ -124,9 +139,8 @@ def _scores_text(s) -> str:
 
 
 def _cmd_calibrate(args) -> int:
-    from nlosplan.sensor_models.calibration.denali_data import is_capture_store
-
-    from nlosplan.sensor_models.calibration.bootstrap import MIN_RESAMPLES
+    from nlosplan.calibration.bootstrap import MIN_RESAMPLES
+    from nlosplan.calibration.denali_data import is_capture_store
 
     t0 = time.perf_counter()
     if 0 < args.bootstrap < MIN_RESAMPLES:  # before the fit, not after it
@@ -141,62 +155,28 @@ def _cmd_calibrate(args) -> int:
 
 
 def _calibrate_plane(args, t0: float) -> int:
-    import numpy as np
-
-    from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.sensor_models.calibration import calibrated_sensor, capture_set, fit_plane, plane_holdout, predict
-    from nlosplan.sensor_models.calibration.plane import holdout_dict
-    from nlosplan.sensor_models.tmf882x_fit import load_distance_captures
-    from nlosplan.simulators import WallScene, wall_arrivals
+    from nlosplan.calibration.plane import holdout_dict
+    from nlosplan.calibration.workflow import calibrate_plane, load_plane
 
     args.sensor = args.sensor or "tmf8828-3x3-short"
     args.zones = args.zones or "4"
     args.pulse = args.pulse or "shape"
     args.lights = args.lights or "on"
     args.min_distance = 0.06 if args.min_distance is None else args.min_distance
-    base = resolve_sensor(args.sensor)
-    captures = load_distance_captures(args.captures)
-    n_zones = captures.hists.shape[1]
-    if n_zones != base.n_zones:
-        raise UserError(f"the captures have {n_zones} zones but sensor {base.name} has {base.n_zones}; "
-                        "give a matching --sensor")
-    zones = _zones(args.zones, n_zones)
+    captures, base = load_plane(args.captures, args.sensor)
+    zones = _zones(args.zones, captures.hists.shape[1])
     steps = _steps(args.steps)
     if not 0 <= args.holdout < 1:
         raise UserError(f"--holdout {args.holdout} must be >= 0 and < 1 (the held-out fraction)")
-
-    def arrivals(d):
-        t, w = wall_arrivals(WallScene(distance_m=d, albedo=1.0), base)
-        return t.reshape(n_zones, -1), w.reshape(n_zones, -1)
-
-    kw = dict(zones=zones, iterations=base.iterations, steps=steps, pulse=args.pulse, noise=args.noise,
-              min_distance_m=args.min_distance, start=_parse_start(args.start))
+    start = _parse_start(args.start)
     note(args, f"calibrating {base.name} on {captures.distance_m.size} captures ({', '.join(steps)}) ...")
-    holdout = None
-    if args.holdout > 0:
-        fit, holdout = plane_holdout(captures, arrivals, fit_fraction=1 - args.holdout, seed=args.seed, **kw)
-    else:
-        fit, _ = fit_plane(captures, arrivals, **kw)
-    cs_all = capture_set(captures, arrivals, zones, base.iterations,
-                         np.flatnonzero(captures.distance_m >= args.min_distance))
-    floor = float(np.median(cs_all.counts[..., -30:])) if args.noise == "measured" else None
-    sensor = calibrated_sensor(base, fit, floor, lights_on=args.lights == "on")
-    fit_idx = np.flatnonzero(captures.distance_m >= args.min_distance) if holdout is None else holdout.fit_indices
-    boot = _bootstrap(args, capture_set(captures, arrivals, zones, base.iterations, fit_idx), fit, args.noise)
-    files = {}
-    if args.out:
-        sensor.save(args.out)
-        files["sensor"] = str(args.out)
-    if args.plot:
-        from nlosplan.reports.calibration_plot import plot_calibration
-
-        pred = predict(fit, cs_all, args.noise)
-        path = plot_calibration(cs_all.counts.reshape(-1, cs_all.counts.shape[-1]),
-                                pred.reshape(-1, pred.shape[-1]),
-                                [f"{lab} z{z}" for lab in cs_all.labels for z in zones], args.plot,
-                                title=f"{base.name} calibrated on {args.captures}")
-        files["plot"] = str(path)
-    data = {"sensor": sensor.name, "base": base.name, "fit": fit.to_dict(),
+    cal = calibrate_plane(captures, base, zones=zones, steps=steps, pulse=args.pulse, noise=args.noise,
+                          min_distance_m=args.min_distance, start=start, holdout=args.holdout, seed=args.seed,
+                          lights=args.lights)
+    fit, holdout = cal.fit, cal.holdout
+    boot = _bootstrap(args, cal)
+    files = _write(args, cal)
+    data = {"sensor": cal.sensor.name, "base": base.name, "fit": fit.to_dict(),
             "bootstrap": None if boot is None else boot.to_dict(),
             "holdout": None if holdout is None else holdout_dict(holdout), "files": files,
             "seconds": time.perf_counter() - t0}
@@ -212,13 +192,9 @@ def _calibrate_plane(args, t0: float) -> int:
 
 
 def _calibrate_denali(args, t0: float) -> int:
-    import numpy as np
-
+    from nlosplan.calibration import STEPS
+    from nlosplan.calibration.workflow import calibrate_denali, load_denali
     from nlosplan.cli.common import parse_where
-    from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.sensor_models.calibration import STEPS, predict
-    from nlosplan.sensor_models.calibration import denali as cal
-    from nlosplan.sensor_models.calibration import denali_data as inputs
 
     for flag, value in (("--lights", args.lights), ("--min-distance", args.min_distance)):
         if value is not None:
@@ -232,54 +208,21 @@ def _calibrate_denali(args, t0: float) -> int:
         raise UserError(f"--holdout {args.holdout} must be >= 0 and < 1 (the held-out fraction)")
     start = _parse_start(args.start)
     fidelity = args.fidelity or "default"
-    from nlosplan.simulators.fast.fidelity import resolve_fidelity
-
-    resolve_fidelity(fidelity)
-    caps = inputs.load_denali_captures(args.captures, parse_where(args.where), trust_pickle=args.trust_pickle)
-    if args.sensor:
-        base = resolve_sensor(args.sensor)
-    elif caps.sensor is not None:
-        base = caps.sensor
-    else:
-        raise UserError(f"the captures in {args.captures} were stored with several sensors; give --sensor, or "
-                        "filter with --where sensor_hash=...")
-    inputs.check_sensor(caps, base)
-    cal.check_noise(caps.labels["lights"], args.noise)
-    zones = _zones(args.zones, base.n_zones) if args.zones else inputs.wall_zones(base, fidelity=fidelity)
-    pulse = args.pulse or ("shape" if base.pulse_shape is not None else "gaussian")
-    cal.pulse_model(base, pulse)
+    caps, base = load_denali(args.captures, parse_where(args.where), sensor=args.sensor,
+                             trust_pickle=args.trust_pickle, fidelity=fidelity, noise=args.noise)
+    zones = _zones(args.zones, base.n_zones) if args.zones else None
     where = "DENALI folder" if Path(args.captures).is_dir() else "capture store"
-    note(args, f"calibrating {base.name} on {len(caps)} captures of {args.captures} ({where}; {', '.join(steps)}) ...")
-    cs = inputs.denali_capture_set(caps, base, zones=zones, fidelity=fidelity)
-    groups = caps.floor_groups()
-    kw = dict(steps=steps, pulse=pulse, noise=args.noise, start=start)
-    holdout = None
-    if args.holdout > 0:
-        fit, holdout = cal.denali_holdout(cs, caps.positions, base, fit_fraction=1 - args.holdout, seed=args.seed,
-                                          groups=groups, **kw)
-    else:
-        fit = cal.fit_denali(cs, base, groups=groups, **kw)
-    sensor = cal.calibrated_denali_sensor(base, fit, cs, caps.labels["lights"], args.noise, groups)
-    fit_idx = (np.arange(len(cs.labels)) if holdout is None
-               else np.flatnonzero(np.isin(caps.positions, holdout.positions_fit)))
-    cs_fit = cs.subset(fit_idx)
-    fit_groups = None if groups is None else np.asarray(groups, dtype=str)[fit_idx]
-    boot = _bootstrap(args, cs_fit, fit, cal.fit_floors(fit, cs_fit, args.noise, fit_groups))
-    files = {}
-    if args.out:
-        sensor.save(args.out)
-        files["sensor"] = str(args.out)
-    if args.plot:
-        from nlosplan.reports.calibration_plot import plot_calibration
-
-        pred = predict(fit, cs, cal.fit_floors(fit, cs, args.noise, groups))
-        path = plot_calibration(cs.counts.reshape(-1, cs.counts.shape[-1]), pred.reshape(-1, pred.shape[-1]),
-                                [f"{lab} z{z}" for lab in cs.labels for z in zones], args.plot,
-                                title=f"{base.name} calibrated on {args.captures}")
-        files["plot"] = str(path)
+    cal = calibrate_denali(
+        caps, base, steps=steps, zones=zones, pulse=args.pulse, noise=args.noise, start=start,
+        holdout=args.holdout, seed=args.seed, fidelity=fidelity,
+        on_start=lambda: note(args, f"calibrating {base.name} on {len(caps)} captures of {args.captures} "
+                                    f"({where}; {', '.join(steps)}) ..."))
+    fit, holdout, zones, pulse = cal.fit, cal.holdout, cal.zones, cal.pulse
+    boot = _bootstrap(args, cal)
+    files = _write(args, cal)
     info = {**caps.describe(), "kind": where, "where": parse_where(args.where), "zones_fitted": zones,
             "pulse": pulse, "noise": args.noise, "fidelity": fidelity}
-    data = {"sensor": sensor.name, "base": base.name, "input": info, "fit": fit.to_dict(),
+    data = {"sensor": cal.sensor.name, "base": base.name, "input": info, "fit": fit.to_dict(),
             "bootstrap": None if boot is None else boot.to_dict(), "holdout": None if holdout is None else holdout.to_dict(), "files": files,
             "seconds": time.perf_counter() - t0}
     lines = [f"calibrated {base.name} on {args.captures} ({where}: {len(caps)} captures at {info['positions']} "

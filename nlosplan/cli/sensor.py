@@ -36,7 +36,7 @@ def _cmd_sensor_show(args) -> int:
 
 
 def _cmd_sensor_fit(args) -> int:
-    from nlosplan.sensor_models.tmf882x_report import fit_report
+    from nlosplan.calibration.tmf882x_report import fit_report
 
     report = fit_report(args.path)
     emit(args, report, report["summary"])

@@ -7,7 +7,7 @@ Sources
   illuminator 30 x 32 deg FWHM, iterations (3x3: 550k; 8x8: 125k).
 - MEAS: measured by nlosplan from real TMF882x 3x3 short-range histograms of a
   plane at 80 known distances (``../shared/data/tmf882x_distance``; method in
-  :mod:`nlosplan.sensor_models.tmf882x_fit`): bin width, time offset, pulse
+  :mod:`nlosplan.calibration.tmf882x_fit`): bin width, time offset, pulse
   shape, photon scale, ambient and dark rates. Figures in :data:`MEASURED`.
 - DRV: the DENALI / cc-hardware driver constant for long range (260 ps bins).
 - ST: ST UM3183 and the cc-hardware VL53L8CH driver (compact normalised
