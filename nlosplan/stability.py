@@ -1,68 +1,23 @@
 """The stability catalog: stiff and extreme cases every room must survive.
 
-Each room contributes an explicit list of :class:`Case` objects (no
-registration by import side effect); :func:`all_cases` gathers them and
-:func:`run_cases` runs them, timing each and turning exceptions into
-failures with their message.
+Each room contributes an explicit list of :class:`~nlosplan.cases.Case`
+objects (no registration by import side effect); :func:`all_cases` gathers
+them and :func:`~nlosplan.cases.run_cases` runs them, timing each and turning
+exceptions into failures with their message. This module sits above the
+rooms it lists (sensor_models, simulators); the entry type and the runner
+live below every room, in :mod:`nlosplan.cases`.
 """
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass
-from typing import Callable
+from nlosplan.cases import Case, CaseResult, run_cases
+from nlosplan.sensor_models.stability_cases import CASES as sensor_cases
+from nlosplan.simulators.fast.stability_cases import CASES as transport_cases
+from nlosplan.simulators.stability_cases import CASES as simulator_cases
 
-
-@dataclass(frozen=True)
-class Case:
-    """One catalog entry.
-
-    Attributes
-    ----------
-    name : str
-        Short identifier, e.g. ``"jitter-zero"``.
-    requirement : str
-        What must hold, in words.
-    run : callable
-        ``run() -> (passed: bool, measured: str)``.
-    """
-
-    name: str
-    requirement: str
-    run: Callable[[], tuple[bool, str]]
-
-
-@dataclass(frozen=True)
-class CaseResult:
-    """Outcome of one case: name, requirement, pass/fail, what was measured, seconds."""
-
-    name: str
-    requirement: str
-    passed: bool
-    detail: str
-    seconds: float
+__all__ = ["Case", "CaseResult", "all_cases", "run_cases"]
 
 
 def all_cases() -> list[Case]:
     """Every case of every room that has one, sensor models first."""
-    from nlosplan.sensor_models.stability_cases import CASES as sensor_cases
-    from nlosplan.simulators.fast.stability_cases import CASES as transport_cases
-    from nlosplan.simulators.stability_cases import CASES as simulator_cases
-
     return list(sensor_cases) + list(simulator_cases) + list(transport_cases)
-
-
-def run_cases(cases: list[Case], progress: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
-    """Run cases in order; an exception is a failure whose detail is its message."""
-    results = []
-    for case in cases:
-        t0 = time.perf_counter()
-        try:
-            passed, detail = case.run()
-        except Exception as exc:  # noqa: BLE001 - a crash is a failed case, reported
-            passed, detail = False, f"raised {type(exc).__name__}: {exc}"
-        res = CaseResult(case.name, case.requirement, bool(passed), detail, time.perf_counter() - t0)
-        results.append(res)
-        if progress is not None:
-            progress(res)
-    return results

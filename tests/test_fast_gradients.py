@@ -10,7 +10,7 @@ import pytest
 from nlosplan._jax import jax, jnp
 from nlosplan.sensor_models import preset
 from nlosplan.simulators import FastSimulator, Fidelity, corner_scene, denali_scene
-from nlosplan.simulators.fast.simulator import _to_jax
+from nlosplan.simulators.fast.simulator import to_jax
 
 FID = Fidelity(zone_sub=3, flash_sub=3, flash_outer=3, object_samples=128, time_oversample=4)
 
@@ -18,8 +18,8 @@ FID = Fidelity(zone_sub=3, flash_sub=3, flash_outer=3, object_samples=128, time_
 def setup(scene, sensor):
     sim = FastSimulator(scene, sensor, fidelity=FID, dtype="float64")
     sc, sp = sim.params()
-    sc = jax.tree_util.tree_map(lambda a: a[0], _to_jax(sc, jnp.float64))
-    sp = jax.tree_util.tree_map(lambda a: a[0], _to_jax(sp, jnp.float64))
+    sc = jax.tree_util.tree_map(lambda a: a[0], to_jax(sc, jnp.float64))
+    sp = jax.tree_util.tree_map(lambda a: a[0], to_jax(sp, jnp.float64))
     f = sim.function()
     weights = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, (sensor.n_zones, sensor.n_bins)))
     return f, sc, sp, weights
@@ -80,6 +80,6 @@ def test_vmap_over_positions_equals_the_batch():
     scenes = [denali_scene("A", "8in", p) for p in (3, 50)]
     sim = FastSimulator(scenes, SENSOR, fidelity=FID, dtype="float64")
     sc, sp = sim.params()
-    sc, sp = _to_jax(sc, jnp.float64), jax.tree_util.tree_map(lambda a: a[0], _to_jax(sp, jnp.float64))
+    sc, sp = to_jax(sc, jnp.float64), jax.tree_util.tree_map(lambda a: a[0], to_jax(sp, jnp.float64))
     v = jax.vmap(lambda q: sim.function()(q, sp))(sc)
     np.testing.assert_allclose(np.asarray(v).reshape(2, 3, 3, -1), sim.expected(), rtol=1e-10, atol=1e-9)

@@ -116,7 +116,7 @@ def test_errors_are_one_line(sensor, lambertian):
 
 
 def test_missing_libllvm_names_the_package(monkeypatch):
-    from nlosplan.simulators import mitsuba_env
+    from nlosplan.simulators.mitsuba import env as mitsuba_env
 
     monkeypatch.setattr(mitsuba_env, "find_libllvm", lambda *a, **k: None)
     with pytest.raises(UserError, match="needs libLLVM >= 16, none found; install it .*apt-get install libllvm19"):

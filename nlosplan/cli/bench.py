@@ -15,7 +15,7 @@ from nlosplan.simulators.fast.bench import (
     DEFAULT_SIZES,
     DEFAULT_REFERENCE_POSITIONS,
     Progress,
-    _check_levels,
+    check_levels,
     bench_simulate,
     bench_steps,
 )
@@ -53,7 +53,7 @@ def _name_list(text: str) -> list[str]:
 def _level_list(text: str) -> list[str]:
     out = [v.strip() for v in text.split(",") if v.strip()]
     try:
-        _check_levels(out)
+        check_levels(out)
     except UserError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return out

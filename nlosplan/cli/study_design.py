@@ -9,15 +9,16 @@ from nlosplan.cli.common import emit, int_type, sub_parser
 
 def _cmd(args) -> int:
     from nlosplan.experiments.design_studies import run_design_study
-    from nlosplan.reports.design_report import requirements_table
+    from nlosplan.reports.design_report import requirements_table, write_design_report
 
     def progress(text, done, total):
         if not args.json and done is None:
             print(f"nlosplan study {args.study}: {text}", file=sys.stderr, flush=True)
 
-    result = run_design_study(args.study, args.out or f"nlosplan-out/study_{args.study}", quick=args.quick,
-                              requirements=args.requirement, resume=args.resume, workers=args.workers,
-                              progress=progress)
+    out = args.out or f"nlosplan-out/study_{args.study}"
+    result = run_design_study(args.study, out, quick=args.quick, requirements=args.requirement, resume=args.resume,
+                              workers=args.workers, progress=progress)
+    result["report"] = write_design_report(result, out)["html"]
     from nlosplan.reports.tables import format_table
 
     text = (format_table(requirements_table(result).to_dict("records"))

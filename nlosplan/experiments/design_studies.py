@@ -4,7 +4,9 @@ Each study is a TOML file beside this module (the same tables as a design
 configuration, see :mod:`nlosplan.planner.design.config`) applied to the
 full or quick configuration and run by
 :func:`~nlosplan.planner.design.run.run_design`; the result is a design
-report restricted to the study's axes.
+result restricted to the study's axes, which the command turns into a design
+report (:mod:`nlosplan.reports.design_report`: the reports room is above this
+one).
 """
 
 from __future__ import annotations
@@ -42,12 +44,8 @@ def study_config(name: str, *, quick: bool = False, requirements=None):
 
 def run_design_study(name: str, out, *, quick: bool = False, requirements=None, resume: bool = False,
                      workers=None, cluster=None, progress=None) -> dict:
-    """Run a study and write its report into ``out``; returns the design result with ``report``."""
+    """Run a study into ``out``; returns the design result (the command writes its report beside it)."""
     from nlosplan.planner.design.run import run_design
-    from nlosplan.reports.design_report import write_design_report
 
     cfg = study_config(name, quick=quick, requirements=requirements)
-    result = run_design(cfg, out, resume=resume, workers=workers, cluster=cluster, progress=progress)
-    paths = write_design_report(result, out)
-    result["report"] = paths["html"]
-    return result
+    return run_design(cfg, out, resume=resume, workers=workers, cluster=cluster, progress=progress)

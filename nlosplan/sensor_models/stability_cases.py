@@ -18,7 +18,7 @@ from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.counts import coates_correction, pileup_expected, sample_poisson
 from nlosplan.sensor_models.pipeline import apply_jitter, expected_histogram, sample_histogram
 from nlosplan.sensor_models.presets import preset
-from nlosplan.stability import Case
+from nlosplan.cases import Case
 
 _EDGES = np.arange(129, dtype=np.float64) * 100.0  # 128 bins of 100 ps
 

@@ -2,30 +2,27 @@
 
 - Scenes: :class:`Scene` (LiDAR pose, relay wall, planes, hidden objects),
   presets :func:`denali_scene` (the DENALI rig) and :func:`corner_scene`.
-- Transport: the fast JAX backend (:class:`FastSimulator`), behind the
-  backend-independent :func:`expected_histogram`, :func:`sample`,
-  :func:`background_histogram`, :func:`explain` and :func:`simulate`.
+- Transport: one :class:`Backend` protocol and the table :data:`BACKENDS`
+  (``fast``: the JAX backend, :class:`FastSimulator`; ``mitsuba``: the
+  Mitsuba 3 twin), behind the backend-independent :func:`expected_histogram`,
+  :func:`sample`, :func:`background_histogram`, :func:`explain` and
+  :func:`simulate` (results: :class:`SimulationResult`).
 - :func:`simulate_wall`: a sensor facing a plain wall (first bounce only),
   the scene of the time-base calibration.
 """
 
-from nlosplan.simulators.api import (
-    BACKENDS,
-    SimulationResult,
-    background_histogram,
-    expected_histogram,
-    explain,
-    sample,
-    simulate,
-)
+from nlosplan.simulators.api import BACKENDS, background_histogram, expected_histogram, explain, sample, simulate
+from nlosplan.simulators.backend import Backend
 from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity
 from nlosplan.simulators.meshes import load_obj, sample_surface, square_patch, surface_quadrature
 from nlosplan.simulators.presets import corner_scene, denali_scene, scene_at
+from nlosplan.simulators.result import SimulationResult
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, NLOSWarning, Rect, Scene
 from nlosplan.simulators.wall import WallScene, simulate_wall, wall_arrivals
 
 __all__ = [
     "BACKENDS",
+    "Backend",
     "FIDELITY_LEVELS",
     "FastSimulator",
     "Fidelity",

@@ -6,6 +6,11 @@ and a :class:`~nlosplan.sensor_models.config.SensorConfig`. The background
 follows DENALI's NOOBJECT protocol: the same capture without the hidden
 object; the signal is the capture minus the background.
 
+The backend is looked up by name in :data:`BACKENDS` (one
+:class:`~nlosplan.simulators.backend.Backend` each: ``fast`` and
+``mitsuba``) after the inputs are checked; every backend builds its
+:class:`~nlosplan.simulators.result.SimulationResult` the same way.
+
 Examples
 --------
 >>> from nlosplan.sensor_models import preset
@@ -17,37 +22,32 @@ Examples
 
 from __future__ import annotations
 
-import time
-import warnings
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.simulators.backend import Backend
+from nlosplan.simulators.fast.backend import FastBackend
 from nlosplan.simulators.fast.plan import SimPlan, build_plan
-from nlosplan.simulators.fast.simulator import FastSimulator
-from nlosplan.simulators.scene import NLOSWarning, Scene
+from nlosplan.simulators.mitsuba.backend import TwinBackend
+from nlosplan.simulators.result import SimulationResult
+from nlosplan.simulators.scene import Scene
 
-#: Backends that can be asked for by name ("mitsuba": the Mitsuba 3 twin, imported only when asked for).
-BACKENDS = ("fast", "mitsuba")
+__all__ = ["BACKENDS", "background_histogram", "expected_histogram", "explain", "sample", "simulate"]
+
+#: The backends by name ("mitsuba": the Mitsuba 3 twin; Mitsuba itself is imported on its first render).
+BACKENDS: dict[str, Backend] = {"fast": FastBackend(), "mitsuba": TwinBackend()}
 
 
-def _check(scene: Scene, sensor: SensorConfig, backend: str) -> None:
+def _backend(scene: Scene, sensor: SensorConfig, backend: str) -> Backend:
+    """The backend asked for, after checking the scene and sensor."""
     if not isinstance(scene, Scene):
         raise UserError(f"scene must be a Scene (e.g. denali_scene(...)), not {type(scene).__name__}")
     if not isinstance(sensor, SensorConfig):
         raise UserError(f"sensor must be a SensorConfig (e.g. preset('tmf8828-3x3-short')), not {type(sensor).__name__}")
     if backend not in BACKENDS:
         raise UserError(f"unknown backend {backend!r}; available: {', '.join(BACKENDS)}")
-
-
-def _simulator(scene, sensor, backend, **kw) -> FastSimulator:
-    _check(scene, sensor, backend)
-    sim = FastSimulator(scene, sensor, **kw)
-    for w in sim.plan.warnings:
-        warnings.warn(w, NLOSWarning, stacklevel=3)
-    return sim
+    return BACKENDS[backend]
 
 
 def expected_histogram(scene: Scene, sensor: SensorConfig, *, backend: str = "fast", fidelity="default",
@@ -75,12 +75,8 @@ def expected_histogram(scene: Scene, sensor: SensorConfig, *, backend: str = "fa
     ndarray, shape (rows, cols, n_bins), or (len(zones), n_bins)
         Expected counts (after pile-up and the 24-bit clip when enabled).
     """
-    if backend == "mitsuba":
-        _check(scene, sensor, backend)
-        from nlosplan.simulators.mitsuba.backend import expected as twin_expected
-
-        return twin_expected(scene, sensor, fidelity=fidelity, zones=zones)
-    return _simulator(scene, sensor, backend, fidelity=fidelity, zones=zones, dtype=dtype, prune=prune).expected()
+    return _backend(scene, sensor, backend).expected(scene, sensor, fidelity=fidelity, zones=zones, dtype=dtype,
+                                                     prune=prune)
 
 
 def background_histogram(scene: Scene, sensor: SensorConfig, **kw) -> np.ndarray:
@@ -88,7 +84,8 @@ def background_histogram(scene: Scene, sensor: SensorConfig, **kw) -> np.ndarray
     return expected_histogram(scene.without_objects(), sensor, **kw)
 
 
-def sample(scene: Scene, sensor: SensorConfig, rng=0, repeats: int = 1, **kw) -> np.ndarray:
+def sample(scene: Scene, sensor: SensorConfig, rng=0, repeats: int = 1, *, backend: str = "fast",
+           fidelity="default", zones=None, dtype="float32", prune: bool = True) -> np.ndarray:
     """Noisy captures: Poisson counts of the expectation, 24-bit clipped.
 
     Parameters
@@ -97,21 +94,15 @@ def sample(scene: Scene, sensor: SensorConfig, rng=0, repeats: int = 1, **kw) ->
         Explicit randomness.
     repeats : int
         Independent captures.
-    **kw
+    backend, fidelity, zones, dtype, prune
         As :func:`expected_histogram`.
 
     Returns
     -------
     ndarray of int64, shape (repeats, rows, cols, n_bins) (or (repeats, zones, n_bins))
     """
-    backend = kw.pop("backend", "fast")
-    if backend == "mitsuba":
-        _check(scene, sensor, backend)
-        from nlosplan.simulators.mitsuba.simulator import TwinSimulator
-
-        return TwinSimulator(scene, sensor, fidelity=kw.get("fidelity", "default"), zones=kw.get("zones")).sample(
-            rng, repeats)
-    return _simulator(scene, sensor, backend, **kw).sample(rng, repeats)
+    return _backend(scene, sensor, backend).sample(scene, sensor, rng, repeats, fidelity=fidelity, zones=zones,
+                                                   dtype=dtype, prune=prune)
 
 
 def explain(scene: Scene, sensor: SensorConfig, *, fidelity="default", zones=None, prune: bool = True) -> SimPlan:
@@ -122,44 +113,8 @@ def explain(scene: Scene, sensor: SensorConfig, *, fidelity="default", zones=Non
     SimPlan
         ``str(plan.explain())`` is a table; ``plan.to_dict()`` is JSON-friendly.
     """
-    _check(scene, sensor, "fast")
+    _backend(scene, sensor, "fast")
     return build_plan(scene, sensor, fidelity, zones=zones, prune=prune)
-
-
-@dataclass(frozen=True)
-class SimulationResult:
-    """Everything one simulated capture produces.
-
-    Attributes
-    ----------
-    expected : ndarray, shape (rows, cols, bins)
-        Expected counts with the object.
-    background : ndarray
-        Expected counts without it (NOOBJECT).
-    signal : ndarray
-        ``expected - background``: the object's three-bounce return
-        (plus any non-linear pile-up/clip interaction).
-    parts : dict of ndarray
-        Linear parts of ``expected`` before pile-up and clipping:
-        ``direct``, ``object``, ``background`` (ambient + dark), ``crosstalk``.
-    counts, background_counts : ndarray of int64, shape (repeats, ...) or None
-        Noisy captures with and without the object.
-    plan : SimPlan
-    seconds : float
-        Wall time of the simulation (plans, compilation and runs).
-    meta : dict
-        The scene's labels.
-    """
-
-    expected: np.ndarray
-    background: np.ndarray
-    signal: np.ndarray
-    parts: dict
-    counts: np.ndarray | None
-    background_counts: np.ndarray | None
-    plan: SimPlan
-    seconds: float
-    meta: dict = field(default_factory=dict)
 
 
 def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, backend: str = "fast",
@@ -174,46 +129,5 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
         Noisy captures to draw of each (with and without the object).
     Other parameters as :func:`expected_histogram`.
     """
-    if backend == "mitsuba":
-        _check(scene, sensor, backend)
-        from nlosplan.simulators.mitsuba.backend import simulate as twin_simulate
-
-        return twin_simulate(scene, sensor, rng=rng, repeats=repeats, fidelity=fidelity, zones=zones)
-    t0 = time.perf_counter()
-    if repeats and rng is None:
-        raise UserError("give rng (a seed) to draw noisy captures")
-    kw = dict(fidelity=fidelity, zones=zones, dtype=dtype, prune=prune)
-    sim = _simulator(scene, sensor, backend, **kw)
-    out = sim.expected(parts=True)
-    return assemble_result(sim, out, FastSimulator(scene.without_objects(), sensor, **kw), rng, repeats,
-                           plan=sim.plan, t0=t0, meta=dict(scene.meta))
-
-
-def assemble_result(sim, parts: dict, bg_sim, rng, repeats: int, *, plan, t0: float, meta: dict) -> SimulationResult:
-    """A :class:`SimulationResult` from a backend's simulator with and without the objects.
-
-    Parameters
-    ----------
-    sim, bg_sim
-        Simulators of the scene and of the scene without its objects (``expected()``, ``sample(key, n)``).
-    parts : dict
-        ``sim.expected(parts=True)`` (its ``counts`` is the expected capture).
-    rng : int or jax random key
-        Seed of the noisy captures (used when ``repeats > 0``).
-    repeats : int
-    plan, t0, meta
-        The plan (None for backends without one), the start time and the scene labels.
-    """
-    background = bg_sim.expected()
-    counts = bg_counts = None
-    if repeats:
-        import jax
-
-        key = jax.random.key(int(rng)) if isinstance(rng, (int, np.integer)) else rng
-        k1, k2 = jax.random.split(key)
-        counts, bg_counts = sim.sample(k1, repeats), bg_sim.sample(k2, repeats)
-    parts = dict(parts)
-    expected = parts.pop("counts")
-    return SimulationResult(expected=expected, background=background, signal=expected - background, parts=parts,
-                            counts=counts, background_counts=bg_counts, plan=plan,
-                            seconds=time.perf_counter() - t0, meta=meta)
+    return _backend(scene, sensor, backend).simulate(scene, sensor, rng=rng, repeats=repeats, fidelity=fidelity,
+                                                     zones=zones, dtype=dtype, prune=prune)

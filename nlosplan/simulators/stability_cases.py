@@ -7,7 +7,7 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.presets import preset
 from nlosplan.simulators.wall import WallScene, simulate_wall, wall_arrivals
-from nlosplan.stability import Case
+from nlosplan.cases import Case
 
 
 def _finite_nonneg(h) -> bool:
@@ -57,7 +57,7 @@ def _mitsuba_cpu():
     import sys
 
     code = (
-        "from nlosplan.simulators.mitsuba_env import load_mitsuba, find_libllvm\n"
+        "from nlosplan.simulators.mitsuba.env import load_mitsuba, find_libllvm\n"
         "mi, mitr = load_mitsuba('llvm_ad_rgb')\n"
         "import drjit as dr\n"
         "x = dr.llvm.Float([1.0, 2.0]) * 2\n"

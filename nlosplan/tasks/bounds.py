@@ -29,7 +29,7 @@ from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
-from nlosplan.simulators.fast.simulator import FastSimulator, _to_jax
+from nlosplan.simulators.fast.simulator import FastSimulator, to_jax
 from nlosplan.simulators.fast.transport import forward
 from nlosplan.simulators.scene import Scene
 from nlosplan.tasks.fisher import COND_MAX, analyse_fisher, poisson_fisher
@@ -133,9 +133,9 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nui
     scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
     sim = FastSimulator(scenes, sensor, fidelity=fidelity, zones=zones, dtype="float64", chunk=chunk)
     scene_p, sensor_p = sim.params()
-    scene_p = _to_jax(scene_p, jnp.float64)
-    sensor_p = jax.tree_util.tree_map(lambda a: a[0], _to_jax(sensor_p, jnp.float64))
-    arrays = _to_jax(sim.plan.arrays, jnp.float64)
+    scene_p = to_jax(scene_p, jnp.float64)
+    sensor_p = jax.tree_util.tree_map(lambda a: a[0], to_jax(sensor_p, jnp.float64))
+    arrays = to_jax(sim.plan.arrays, jnp.float64)
     t = jnp.zeros(2 + len(names)) if theta is None else jnp.asarray(theta, jnp.float64).reshape(2 + len(names))
     n, lams, jacs = len(scenes), [], []
     for start in range(0, n, sim.chunk):  # padded chunks of one shape: one compilation

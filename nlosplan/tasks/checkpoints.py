@@ -2,7 +2,7 @@
 
 A checkpoint is one ``torch.save`` file holding a format tag, the model's
 ``state_dict`` (tensors) and the metadata of
-:meth:`~nlosplan.tasks.training.TrainedModel.meta` as a JSON string: nothing
+:meth:`~nlosplan.tasks.training_types.TrainedModel.meta` as a JSON string: nothing
 that needs Python's pickle to load, so :func:`load_checkpoint` reads it with
 ``torch.load(weights_only=True)`` and rebuilds the model from the recorded
 :class:`~nlosplan.tasks.models.ModelSpec`.
@@ -19,6 +19,7 @@ import torch
 
 from nlosplan.errors import UserError
 from nlosplan.tasks.models import ModelSpec, model_from_spec
+from nlosplan.tasks.training_types import Preprocessing, TrainConfig, TrainedModel
 
 __all__ = ["CHECKPOINT_FORMAT", "load_checkpoint", "save_checkpoint"]
 
@@ -97,8 +98,6 @@ def load_checkpoint(path):
     except RuntimeError as exc:
         raise UserError(f"{path}: weights do not fit model {spec.name} ({str(exc).splitlines()[0]})") from None
     net.eval()
-    from nlosplan.tasks.training import Preprocessing, TrainConfig, TrainedModel
-
     cfg = meta["config"]
     return TrainedModel(
         model=net, spec=spec, preprocessing=Preprocessing(**meta["preprocessing"]), config=TrainConfig(**cfg),

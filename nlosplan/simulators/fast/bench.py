@@ -75,7 +75,8 @@ STUDY_LEVEL = "default"
 Progress = Callable[[str], None]
 
 
-def _check_levels(levels: Iterable[str]) -> tuple[str, ...]:
+def check_levels(levels: Iterable[str]) -> tuple[str, ...]:
+    """The timed fidelity levels of a benchmark run, checked: known, not ``reference``, none twice."""
     out = tuple(levels)
     allowed = [k for k in FIDELITY_LEVELS if k != "reference"]
     if not out:
@@ -176,8 +177,8 @@ def bench_simulate(
         ``centroid_shift_bins`` and more), ``reference``, ``pruning``,
         ``arithmetic``, ``machine`` and ``config``.
     """
-    levels = _check_levels(levels)
-    _check_levels([study_level])
+    levels = check_levels(levels)
+    check_levels([study_level])
     positions = _check_positions(positions, "position")
     reference_positions = _check_positions(reference_positions, "reference position")
     missing = sorted(set(reference_positions) - set(positions))

@@ -57,7 +57,8 @@ def _stack(items: list[dict]):
     return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *items)
 
 
-def _to_jax(tree, dtype):
+def to_jax(tree, dtype):
+    """A tree of arrays as JAX arrays: floats in ``dtype``, integers as int32, booleans kept (plans, parameters)."""
     def conv(a):
         a = np.asarray(a)
         if a.dtype == bool:
@@ -116,7 +117,7 @@ class FastSimulator:
         self.single_sensor = sensors is None
         self.plan: SimPlan = build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune)
         self.chunk = max(1, int(chunk))
-        self._arrays = _to_jax(self.plan.arrays, self.dtype)
+        self._arrays = to_jax(self.plan.arrays, self.dtype)
         self._params = None
 
     # ------------------------------------------------------------ parameters
@@ -155,7 +156,7 @@ class FastSimulator:
     def _jax_params(self):
         if self._params is None:  # built once: the scenes and sensors are fixed
             scene_p, sensor_p = self.params()
-            self._params = _to_jax(scene_p, self.dtype), _to_jax(sensor_p, self.dtype)
+            self._params = to_jax(scene_p, self.dtype), to_jax(sensor_p, self.dtype)
         return self._params
 
     def _run(self, parts: bool):

@@ -18,11 +18,11 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.presets import preset
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 from nlosplan.simulators.fast.fidelity import Fidelity
-from nlosplan.simulators.fast.simulator import FastSimulator, _to_jax
+from nlosplan.simulators.fast.simulator import FastSimulator, to_jax
 from nlosplan.simulators.fast.transport import forward
 from nlosplan.simulators.presets import corner_scene, denali_scene
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh
-from nlosplan.stability import Case
+from nlosplan.cases import Case
 
 #: Cheap quadrature where accuracy is not the point (draft-like; flash_outer 3 keeps the outer flash cells
 #: finer than the 5 cm patch's distance to the field of view).
@@ -365,10 +365,10 @@ def gradient_entries(sim: FastSimulator) -> np.ndarray:
     derivative is not zero by conservation of counts). Reverse mode (``jax.grad``), as an optimizer uses it.
     """
     static = sim.plan.static
-    arrays = _to_jax(sim.plan.arrays, jnp.float64)
+    arrays = to_jax(sim.plan.arrays, jnp.float64)
     scenes_p, sp = sim.params()
-    scenes_p = _to_jax(scenes_p, jnp.float64)
-    sp = jax.tree_util.tree_map(lambda a: a[0], _to_jax(sp, jnp.float64))
+    scenes_p = to_jax(scenes_p, jnp.float64)
+    sp = jax.tree_util.tree_map(lambda a: a[0], to_jax(sp, jnp.float64))
     w = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, (static.n_zones, sim.plan.sensor.n_bins)))
 
     def loss(v, arrays, sc, sp, w):

@@ -9,7 +9,10 @@ import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.simulators.mitsuba.simulator import TwinSimulator
+from nlosplan.simulators.result import SimulationResult, assemble_result
 from nlosplan.simulators.scene import NLOSWarning
+
+__all__ = ["TwinBackend"]
 
 
 def _warn_planes(scene) -> None:
@@ -19,44 +22,48 @@ def _warn_planes(scene) -> None:
                       f"of {names} are not in its histograms", NLOSWarning, stacklevel=4)
 
 
-def expected(scene, sensor, *, fidelity="default", zones=None, seed: int = 0, variant: str = "auto",
-             illumination: str = "flash") -> np.ndarray:
-    """Expected counts of one capture rendered by the twin (see :class:`TwinSimulator`).
+class TwinBackend:
+    """:class:`~nlosplan.simulators.backend.Backend` of :class:`TwinSimulator` (seed 0 unless given).
 
-    Returns
-    -------
-    ndarray, shape (rows, cols, n_bins) or (len(zones), n_bins), float64
+    ``dtype`` and ``prune`` do not apply (results are float64, nothing is
+    pruned); ``seed``, ``variant`` and ``illumination`` are the twin's own
+    keywords (see :class:`TwinSimulator`).
     """
-    _warn_planes(scene)
-    return TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones, seed=seed, variant=variant,
-                         illumination=illumination).expected()
 
+    name = "mitsuba"
 
-def simulate(scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", zones=None, seed: int = 0,
-             variant: str = "auto", illumination: str = "flash"):
-    """Expected capture, NOOBJECT background, signal, parts and optional noisy captures, by the twin.
+    def expected(self, scene, sensor, *, fidelity="default", zones=None, dtype=None, prune=None, seed: int = 0,
+                 variant: str = "auto", illumination: str = "flash") -> np.ndarray:
+        """Expected counts of one capture rendered by the twin, (rows, cols, n_bins) or (len(zones), n_bins), float64."""
+        _warn_planes(scene)
+        return TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones, seed=seed, variant=variant,
+                             illumination=illumination).expected()
 
-    The background is the same render without the three-bounce term (the
-    twin's direct wall return does not depend on the hidden objects), so the
-    signal is exactly the object's three-bounce counts through the pipeline.
+    def sample(self, scene, sensor, rng, repeats: int, *, fidelity="default", zones=None, dtype=None,
+               prune=None) -> np.ndarray:
+        """Poisson captures of the twin's expected counts, (repeats, ...), int64."""
+        return TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones).sample(rng, repeats)
 
-    Returns
-    -------
-    SimulationResult
-        ``plan`` is None (the twin has no plan of left-out terms); ``meta``
-        gains ``twin``: fidelity, variant, seed, render seconds.
-    """
-    from nlosplan.simulators.api import assemble_result
+    def simulate(self, scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", zones=None, dtype=None,
+                 prune=None, seed: int = 0, variant: str = "auto", illumination: str = "flash") -> SimulationResult:
+        """Expected capture, NOOBJECT background, signal, parts and optional noisy captures, by the twin.
 
-    t0 = time.perf_counter()
-    if repeats and rng is None:
-        raise UserError("give rng (a seed) to draw noisy captures")
-    _warn_planes(scene)
-    sim = TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones, seed=seed, variant=variant,
-                        illumination=illumination)
-    out = sim.expected(parts=True)
-    bg_sim = TwinSimulator(scene.without_objects(), sensor, fidelity=fidelity, zones=zones, seed=seed,
-                           variant=variant, illumination=illumination)
-    bg_sim._transient = {**sim.transient(), "object": np.zeros_like(sim.transient()["object"])}
-    return assemble_result(sim, out, bg_sim, rng, repeats, plan=None, t0=t0,
-                           meta={**scene.meta, "twin": sim.describe()})
+        The background is the same render without the three-bounce term (the
+        twin's direct wall return does not depend on the hidden objects), so the
+        signal is exactly the object's three-bounce counts through the pipeline.
+
+        Returns
+        -------
+        SimulationResult
+            ``plan`` is None (the twin has no plan of left-out terms); ``meta``
+            gains ``twin``: fidelity, variant, seed, render seconds.
+        """
+        t0 = time.perf_counter()
+        if repeats and rng is None:
+            raise UserError("give rng (a seed) to draw noisy captures")
+        _warn_planes(scene)
+        sim = TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones, seed=seed, variant=variant,
+                            illumination=illumination)
+        out = sim.expected(parts=True)
+        return assemble_result(sim, out, sim.without_objects(), rng, repeats, plan=None, t0=t0,
+                               meta={**scene.meta, "twin": sim.describe()})

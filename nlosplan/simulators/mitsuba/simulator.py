@@ -26,6 +26,7 @@ spot's direct return is the closed form ``s (rho_w / pi) cos / r^2``.
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -171,6 +172,20 @@ class TwinSimulator:
         self.seconds["total"] = time.perf_counter() - t0
         self._transient = {"times_ps": times, "direct": direct, "object": obj}
         return self._transient
+
+    def without_objects(self) -> "TwinSimulator":
+        """The same capture without hidden objects (DENALI's NOOBJECT), from this simulator's renders.
+
+        The twin's direct wall return does not depend on the hidden objects,
+        so the background is this transient with the three-bounce term set to
+        zero: nothing is rendered again.
+        """
+        tr = self.transient()
+        bg = copy.copy(self)
+        bg.scene = self.scene.without_objects()
+        bg.seconds = {}
+        bg._transient = {**tr, "object": np.zeros_like(tr["object"])}
+        return bg
 
     def _spot_direct(self, spot: np.ndarray, det) -> np.ndarray:
         """Closed-form direct return of a unit-power spot, (Z, K) on the node grid."""
