@@ -1,10 +1,16 @@
-"""``nlosplan bench``: benchmarks that print figures (histogram formation, the fast simulator)."""
+"""``nlosplan bench``: benchmarks that print figures.
+
+``histogram`` and ``simulate`` (histogram formation, the fast simulator) are
+here; ``rig`` (:mod:`.rig`) and ``fidelity``/``crossval`` (:mod:`.fidelity`)
+in their own modules.
+"""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 from typing import Sequence
+
+from nlosplan.cli.bench import fidelity as fidelity_bench, rig as rig_bench
 
 from nlosplan.cli.common import command_group, emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
@@ -162,15 +168,8 @@ def add(sub) -> None:
                     description=BENCH_SIMULATE_DESCRIPTION)
     add_arguments(bs)
     bs.set_defaults(func=_cmd_bench_simulate)
-    for name in MORE_BENCHES:
-        importlib.import_module(f"nlosplan.cli.{name}").add_bench(bsub)
-
-
-# Further ``nlosplan bench NAME`` benchmarks, one module of nlosplan.cli each, with ``add_bench(bsub)``.
-MORE_BENCHES: tuple[str, ...] = (
-    "bench_rig",
-    "bench_fidelity",
-)
+    rig_bench.add_bench(bsub)
+    fidelity_bench.add_bench(bsub)
 
 
 BENCH_SIMULATE_DESCRIPTION = """\

@@ -1,20 +1,14 @@
-"""``nlosplan rig``: run capture plans on the rig (or on pty emulators), dry runs, run status."""
+"""``nlosplan rig capture|dry-run|status``: run capture plans on the rig (or on pty emulators), dry runs, run status."""
 
 from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib
 import json
 from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, number_type, progress_bar
 from nlosplan.errors import UserError
-
-# Further ``nlosplan rig NAME`` subcommands, one module of nlosplan.cli each, with ``add_rig(rsub)``.
-MORE_RIG_COMMANDS: tuple[str, ...] = (
-    "rig_run",
-)
 
 EXAMPLES = {
     "capture": (
@@ -304,8 +298,8 @@ def _cmd_status(args) -> int:
     return 0
 
 
-def add(sub) -> None:
-    """The ``rig`` subcommand: ``capture``, ``dry-run``, ``status`` (and MORE_RIG_COMMANDS)."""
+def add(sub):
+    """The ``rig`` group with ``capture``, ``dry-run`` and ``status``; returns the group's subparsers."""
     from nlosplan.cli.common import command_group
 
     rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL gantry), or its pty emulators",
@@ -345,8 +339,7 @@ def add(sub) -> None:
     s.add_argument("--run", default=None, help="one run id (default: every run)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=_cmd_status)
-    for name in MORE_RIG_COMMANDS:
-        importlib.import_module(f"nlosplan.cli.{name}").add_rig(rsub)
+    return rsub
 
 
 CAPTURE_DESCRIPTION = """\

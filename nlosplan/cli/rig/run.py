@@ -63,7 +63,7 @@ def _approver(args, out: Path):
 
 
 def _cmd(args) -> int:
-    from nlosplan.cli.rig import _open
+    from nlosplan.cli.rig.capture import _open
     from nlosplan.hardware.executor import Executor, RunContext
     from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
     from nlosplan.hardware.plans import ask_tell_plan
@@ -108,9 +108,9 @@ def _cmd(args) -> int:
                      plan=f"planner {args.planner}, budget {args.budget}, batches of {args.batch}",
                      plan_spec={"kind": "planner", "planner": args.planner, "budget": args.budget,
                                 "batch": args.batch, "grid": args.grid, "seed": args.seed})
-    plan = ask_tell_plan(loop.suggest, loop.tell, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
+    plan = ask_tell_plan(loop.suggest, loop.ingest, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
                          max_positions=args.budget)
-    # what the rig CLI's opener (nlosplan.cli.rig._open) reads besides the options above
+    # what the rig CLI's opener (nlosplan.cli.rig.capture._open) reads besides the options above
     args.emulate_faults, args.no_park, args.sensor_config = None, False, sensor
     with CaptureStore(args.store) as store, _open(args) as rig:
         ex = Executor(rig, store, run_id=run_id, context=ctx)
@@ -142,7 +142,7 @@ def _cmd(args) -> int:
 
 def add_rig(rsub) -> None:
     """Register ``nlosplan rig run``."""
-    from nlosplan.cli.rig import add_mode_options, add_motion_options
+    from nlosplan.cli.rig.capture import add_mode_options, add_motion_options
     from nlosplan.planner.capture import STRATEGIES
 
     p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import sys
 import time
 from pathlib import Path
 
 from nlosplan.cli.benchmark import add_training_options, training_options
+from nlosplan.cli.study import active as active_study, design as design_studies
 from nlosplan.cli.common import command_group, emit, names_type, note, number_type, parse_where, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
@@ -147,7 +147,7 @@ do not help these small models and can be far slower on a busy machine
 
 
 def add(sub) -> None:
-    """The ``study`` subcommand: ``jitter`` here, then the modules of :data:`MORE_STUDIES`."""
+    """The ``study`` subcommand: ``jitter`` here, then ``resolution``/``bins`` (:mod:`.design`) and ``active-vs-raster`` (:mod:`.active`)."""
     ssub = command_group(sub, "study", "declarative studies (jitter, resolution, bins, active-vs-raster)",
                          "Declarative studies: a small configuration of what to vary, run through the benchmark models, "
                          "the design planner or the capture planner, written as tables, JSON and a figure.",
@@ -187,12 +187,5 @@ def add(sub) -> None:
     out.add_argument("--json", action="store_true", help="print the whole result as JSON")
     out.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_cmd_jitter)
-    for name in MORE_STUDIES:
-        importlib.import_module(f"nlosplan.cli.{name}").add_study(ssub)
-
-
-# Further ``nlosplan study NAME`` studies, one module of nlosplan.cli each, with ``add_study(ssub)``.
-MORE_STUDIES: tuple[str, ...] = (
-    "study_design",
-    "study_active",
-)
+    design_studies.add_study(ssub)
+    active_study.add_study(ssub)
