@@ -5,7 +5,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig
-from nlosplan.calibration import CaptureSet, calibrated_sensor, fit_calibration, usable_zones
+from nlosplan.calibration import CaptureSet, calibrated_sensor, fit_sensor_model, usable_zones
 from nlosplan.sensor_models.pipeline import expected_histogram
 from nlosplan.simulators import WallScene, wall_arrivals
 
@@ -49,7 +49,7 @@ def simulated():
 @pytest.fixture(scope="module")
 def recovered(simulated):
     start = {"bin_width_ps": 94.0, "start_offset_ps": -1100.0, "pulse_fwhm_ps": 150.0}
-    return fit_calibration(simulated, start=start, noise="global")
+    return fit_sensor_model(simulated, start=start, noise="global")
 
 
 def test_recovers_known_parameters_within_their_uncertainties(recovered):
@@ -73,7 +73,7 @@ def test_recovers_known_parameters_within_their_uncertainties(recovered):
 def test_steps_stack_and_scale_alone_only_fits_the_scale(simulated):
     start = {"bin_width_ps": TRUE["bin_width_ps"], "start_offset_ps": TRUE["start_offset_ps"],
              "pulse_fwhm_ps": TRUE["pulse_fwhm_ps"], "crosstalk": TRUE["crosstalk"], "noise_per_bin": FLOOR}
-    fit = fit_calibration(simulated, steps=["scale"], start=start)
+    fit = fit_sensor_model(simulated, steps=["scale"], start=start)
     assert fit.fitted == ["photon_scale"]
     assert fit.values["bin_width_ps"] == TRUE["bin_width_ps"]
     assert fit.values["photon_scale"] == pytest.approx(TRUE["photon_scale"], rel=0.005)
@@ -106,17 +106,17 @@ def test_saturated_and_empty_zones_are_left_out_with_a_message(simulated):
 def test_no_signal_anywhere_is_a_clear_error(simulated):
     cs = CaptureSet(np.full_like(simulated.counts, 3.0), simulated.times_ps, simulated.weights, ITERS, simulated.labels)
     with pytest.raises(UserError, match="no capture zone has usable signal: 12 left out"):
-        fit_calibration(cs)
+        fit_sensor_model(cs)
 
 
 def test_bad_starts_are_rejected_or_detected(simulated):
     with pytest.raises(UserError, match=r"start value bin_width_ps=300 ps is outside its bounds \[50, 200\]"):
-        fit_calibration(simulated, start={"bin_width_ps": 300.0})
+        fit_sensor_model(simulated, start={"bin_width_ps": 300.0})
     with pytest.raises(UserError, match="unknown calibration step\\(s\\) shift; allowed: scale, pulse, noise"):
-        fit_calibration(simulated, steps=["shift"])
+        fit_sensor_model(simulated, steps=["shift"])
     # a time offset 25 bins off, fitting the scale alone: the peaks cannot match and the fit says so
     with pytest.raises(UserError, match="did not lock onto the measured peaks .* start is probably too far off"):
-        fit_calibration(simulated, steps=["scale"], start={"start_offset_ps": 1000.0})
+        fit_sensor_model(simulated, steps=["scale"], start={"start_offset_ps": 1000.0})
 
 
 def _jittered_captures(offset_sd_ps, seed=1):
@@ -156,7 +156,7 @@ def test_bootstrap_sees_what_fisher_cannot_a_time_base_wandering_between_capture
 
     cs = _jittered_captures(offset_sd_ps=6.0)
     start = {"bin_width_ps": 94.0, "start_offset_ps": -1100.0, "pulse_fwhm_ps": 150.0}
-    fit = fit_calibration(cs, start=start, noise="global")
+    fit = fit_sensor_model(cs, start=start, noise="global")
     b = bootstrap_errors(cs, fit, resamples=10, seed=0)
     # photon counting alone pins the offset to well under a picosecond; the captures scatter by 6 ps, and the
     # offset (at t = 0) is extrapolated from returns at 0.5-2.7 ns: ~6 ps x 0.76 (regression intercept) ~ 4.5 ps
@@ -170,6 +170,6 @@ def test_bootstrap_refuses_too_few_resamples_or_captures(simulated, recovered):
 
     with pytest.raises(UserError, match="at least 5"):
         bootstrap_errors(simulated, recovered, resamples=3)
-    one = fit_calibration(simulated.subset([5]), start={"bin_width_ps": 91.0, "start_offset_ps": -1150.0})
+    one = fit_sensor_model(simulated.subset([5]), start={"bin_width_ps": 91.0, "start_offset_ps": -1150.0})
     with pytest.raises(UserError, match="at least 2 captures"):
         bootstrap_errors(simulated.subset([5]), one, resamples=5)

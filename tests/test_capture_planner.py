@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nlosplan.errors import UserError
-from nlosplan.planner.capture import CapturePlanner, PlannerConfig, fit_calibration
+from nlosplan.planner.capture import CapturePlanner, PlannerConfig, fit_counts_model
 from nlosplan.planner.capture.space import CandidateSpace
 from nlosplan.planner.capture.strategies import raster_order
 
@@ -134,7 +134,7 @@ def test_calibration_fit_recovers_the_truth_and_doptimal_beats_raster_early():
     rng = np.random.default_rng(5)
     idx = np.arange(space.size)
     obs = np.array([observe(space, i, rng, truth) for i in idx])
-    fit = fit_calibration(space, idx, obs)
+    fit = fit_counts_model(space, idx, obs)
     assert np.all(np.abs(fit["theta"] - truth) <= 4 * fit["std"])
     assert fit["identifiable"]
     det = {}

@@ -9,6 +9,7 @@ import pytest
 from nlosplan.planner.design.config import load_config, quick_config
 from nlosplan.planner.design.data import SceneSet, load_reference
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY, evaluate
+from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, DesignConfig, read_evaluations, run_design
 from nlosplan.planner.design.search import SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
@@ -139,9 +140,8 @@ def test_report_is_written_and_self_contained(finished):
 
 
 def test_bad_reference_is_a_recorded_failure(tmp_path):
-    job = {"evaluator": "bound", "task": "loc", "design": Design().to_dict(), "seed": 0,
-           "fidelity": DEFAULT_FIDELITY["bound"], "condition": None, "reference": str(tmp_path / "missing.npz"),
-           "reference_sensor": DesignSpace().sensor.to_dict()}
+    job = DesignJob("bound", "loc", Design(), 0, DEFAULT_FIDELITY["bound"], None, str(tmp_path / "missing.npz"),
+                    DesignSpace().sensor.to_dict())
     r = evaluate(job)
     assert r["status"] == "failed" and "missing.npz" in r["reason"] and math.isnan(r["value"])
 

@@ -7,6 +7,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import Requirement, parse_requirement
 from nlosplan.planner.design.search import DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
@@ -28,25 +29,25 @@ def truth(task: str, d: Design, evaluator: str) -> float:
     return rmse if task == "loc" else acc
 
 
-def fake_result(job: dict) -> dict:
-    d = Design.from_dict(job["design"])
-    v = truth(job["task"], d, job["evaluator"])
-    half = 0.0 if job["evaluator"] == "bound" and job["task"] == "loc" else 0.01 * (1 if job["task"] != "loc" else v)
-    return {**job, "metric": "x", "value": v, "lo": v - half, "hi": v + half, "seconds": 0.01, "status": "ok",
-            "reason": "", "extra": {}}
+def fake_result(job: DesignJob) -> dict:
+    d = job.design
+    v = truth(job.task, d, job.evaluator)
+    half = 0.0 if job.evaluator == "bound" and job.task == "loc" else 0.01 * (1 if job.task != "loc" else v)
+    return {**job.to_dict(), "metric": "x", "value": v, "lo": v - half, "hi": v + half, "seconds": 0.01,
+            "status": "ok", "reason": "", "extra": {}}
 
 
 def run(search: DesignSearch, calls: list) -> None:
     while True:
-        jobs = search.ask()
+        jobs = search.suggest()
         if not jobs and search.stage == "optimize":
             search.set_candidates({}, [])
             continue
         if not jobs:
             return
         for j in jobs:
-            calls.append(j["key"])
-            search.tell(fake_result(j))
+            calls.append(j.key)
+            search.ingest([fake_result(j)])
 
 
 def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
@@ -76,7 +77,7 @@ def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
 
     resumed = DesignSearch(SPACE, [LOC, SIZE], cfg, REFS)
     for r in search.results.values():
-        resumed.tell(r)
+        resumed.ingest([r])
     again: list = []
     run(resumed, again)
     assert again == []  # a resumed search asks for nothing already told
@@ -86,15 +87,15 @@ def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
 def test_failed_evaluations_are_recorded_not_fatal():
     search = DesignSearch(SPACE, [SIZE], SearchConfig(grid_points=3, refine_steps=0, seeds=1), REFS)
     n = 0
-    while (jobs := search.ask()) or search.stage == "optimize":
+    while (jobs := search.suggest()) or search.stage == "optimize":
         if not jobs:
             search.set_candidates({}, [])
             continue
         for j in jobs:
             n += 1
-            r = fake_result(j) if n % 3 else {**j, "status": "failed", "reason": "RuntimeError: boom", "value": math.nan,
+            r = fake_result(j) if n % 3 else {**j.to_dict(), "status": "failed", "reason": "RuntimeError: boom", "value": math.nan,
                                                "lo": math.nan, "hi": math.nan, "seconds": 0.0, "metric": "x"}
-            search.tell(r)
+            search.ingest([r])
     res = summarize(search)
     assert res["failures"] and all(f["reason"] == "RuntimeError: boom" for f in res["failures"])
     assert any(r["feasible"] for r in res["requirements"])

@@ -29,7 +29,7 @@ from nlosplan.calibration.denali_data import (
 from nlosplan.calibration.fit import (
     CalibrationFit,
     ZoneScores,
-    fit_calibration,
+    fit_sensor_model,
     predict,
     usable_zones,
     zone_scores,
@@ -49,6 +49,6 @@ from nlosplan.calibration.workflow import Calibration, calibrate_denali, calibra
 __all__ = ["PARAMS", "PARAM_NAMES", "STEPS", "BootstrapErrors", "Calibration", "CalibrationFit", "CaptureSet",
            "DenaliCaptures", "DenaliHoldout", "DistanceCaptures", "PlaneHoldout", "ZoneScores", "bootstrap_errors",
            "calibrate_denali", "calibrate_plane", "calibrated_denali_sensor", "calibrated_sensor", "capture_set",
-           "denali_capture_set", "denali_holdout", "fit_calibration", "fit_denali", "fit_plane", "fit_pulse_shape",
+           "denali_capture_set", "denali_holdout", "fit_sensor_model", "fit_denali", "fit_plane", "fit_pulse_shape",
            "fit_timebase", "holdout_scores", "load_denali", "load_denali_captures", "load_distance_captures",
            "load_plane", "make_model", "plane_holdout", "predict", "scene_arrivals", "usable_zones", "zone_scores"]

@@ -1,6 +1,6 @@
 """Bootstrap uncertainties of a calibration: refit on captures resampled with replacement.
 
-The Fisher errors of :func:`~.fit.fit_calibration` are statistical only:
+The Fisher errors of :func:`~.fit.fit_sensor_model` are statistical only:
 they assume the model is right and count photons. On real captures the
 model is not exactly right (pile-up, near field, a pulse shape fitted on
 the same data), and the spread of the fitted values over resampled
@@ -73,7 +73,7 @@ def bootstrap_errors(captures: CaptureSet, fit: CalibrationFit, *, resamples: in
     seed : int
         Seed of the resampling.
     noise : {"global", "measured"} or array of shape (N, Z)
-        As in :func:`~.fit.fit_calibration` (the fit's own setting).
+        As in :func:`~.fit.fit_sensor_model` (the fit's own setting).
     max_evals : int
         Objective evaluations per refit.
     progress : callable, optional

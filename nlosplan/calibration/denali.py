@@ -13,7 +13,6 @@ every repeat, object and lights setting at a position is on the same side.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,7 +24,7 @@ from nlosplan.calibration.fit import (
     FLOOR_BINS,
     CalibrationFit,
     ZoneScores,
-    fit_calibration,
+    fit_sensor_model,
     initial_values,
     usable_zones,
     zone_scores,
@@ -33,6 +32,7 @@ from nlosplan.calibration.fit import (
 from nlosplan.calibration.model import PARAM_NAMES, CaptureSet, make_model, poisson_deviance
 from nlosplan.calibration.plane import calibrated_sensor
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.impulse import impulse_fwhm_ps
 
 __all__ = ["MIN_QUIET_BINS", "PULSES", "QUIET_COUNTS", "QUIET_SIGMAS", "DenaliHoldout", "calibrated_denali_sensor",
            "check_noise", "denali_holdout", "fit_denali", "fit_floors", "pulse_model", "quiet_floors",
@@ -73,7 +73,7 @@ def pulse_model(sensor: SensorConfig, pulse: str | None = None) -> tuple:
         pulse = "shape" if sensor.pulse_shape is not None else "gaussian"
     if pulse not in PULSES:
         raise UserError(f"pulse={pulse!r} is unknown; allowed: {', '.join(PULSES)}")
-    fwhm = math.hypot(sensor.pulse_fwhm_ps, sensor.jitter_fwhm_ps)
+    fwhm = impulse_fwhm_ps(sensor.pulse_fwhm_ps, sensor.jitter_fwhm_ps)
     if pulse == "gaussian":
         return None, 100.0, 0.0, fwhm if fwhm >= 20.0 else 150.0
     if sensor.pulse_shape is None:
@@ -163,7 +163,7 @@ def fit_denali(cs: CaptureSet, sensor: SensorConfig, *, steps=("scale", "pulse",
     sensor : SensorConfig
         Start values: its bin width and offset; its pulse shape with ``pulse="shape"``.
     steps : sequence of {"scale", "pulse", "noise"}
-        As :func:`~nlosplan.calibration.fit.fit_calibration`.
+        As :func:`~nlosplan.calibration.fit.fit_sensor_model`.
     noise : {"measured", "global"}
         Each capture zone's own floor (:func:`quiet_floors` under the start
         values; not fitted) or one fitted level.
@@ -195,7 +195,7 @@ def fit_denali(cs: CaptureSet, sensor: SensorConfig, *, steps=("scale", "pulse",
         first["start_offset_ps"] = _scan_offset(cs, used, {**first, **start}, shape, step, t0, noise)
     values = {**initial_values(cs, used), **first, **start}
     floors = quiet_floors(cs, values, shape, step, t0, groups) if noise == "measured" else "global"
-    return fit_calibration(cs, steps=steps, start={**first, **start}, pulse_shape=shape, pulse_step_ps=step,
+    return fit_sensor_model(cs, steps=steps, start={**first, **start}, pulse_shape=shape, pulse_step_ps=step,
                            pulse_t0_ps=t0, noise=floors)
 
 

@@ -1,6 +1,6 @@
 """Sim-to-real calibration by nlopt: stacked steps, Fisher uncertainties, robustness checks.
 
-:func:`fit_calibration` fits the parameters of :mod:`.model` to real
+:func:`fit_sensor_model` fits the parameters of :mod:`.model` to real
 captures by Poisson maximum likelihood (mean deviance per bin), with nlopt's
 BOBYQA on normalized, bounded variables. DENALI's three calibration functions
 are steps that stack (``scale`` -> ``pulse`` -> ``noise``): each fits its
@@ -39,7 +39,7 @@ IDENTIFIABLE_RTOL = 1e-10
 
 @dataclass
 class CalibrationFit:
-    """Result of :func:`fit_calibration`; ``to_dict()`` is JSON-ready.
+    """Result of :func:`fit_sensor_model`; ``to_dict()`` is JSON-ready.
 
     Attributes
     ----------
@@ -255,10 +255,10 @@ def floor_counts(captures: CaptureSet, noise) -> np.ndarray | None:
     return floor[..., None]
 
 
-def fit_calibration(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), start: dict | None = None,
-                    pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0,
-                    noise="global", joint: bool = True, max_evals: int = 600) -> CalibrationFit:
-    """Fit the calibration parameters to real captures.
+def fit_sensor_model(captures: CaptureSet, *, steps=("scale", "pulse", "noise"), start: dict | None = None,
+                     pulse_shape=None, pulse_step_ps: float = 100.0, pulse_t0_ps: float = 0.0,
+                     noise="global", joint: bool = True, max_evals: int = 600) -> CalibrationFit:
+    """Fit the sensor model's calibration parameters (photon scale, pulse, time base, floor, crosstalk) to captures.
 
     Parameters
     ----------
@@ -351,7 +351,7 @@ def _check_peaks(model, theta, captures, used, floor) -> None:
 def predict(fit: CalibrationFit, captures: CaptureSet, noise="global") -> np.ndarray:
     """Expected counts of ``captures`` under the fitted parameters, shape (N, Z, B).
 
-    ``noise`` as in :func:`fit_calibration` (a per-zone floor replaces the fitted global level).
+    ``noise`` as in :func:`fit_sensor_model` (a per-zone floor replaces the fitted global level).
     """
     model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps, fit.values["bin_width_ps"],
                        fit.values["start_offset_ps"])

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.calibration.fit import CalibrationFit, fit_calibration, usable_zones, zone_scores
+from nlosplan.calibration.fit import CalibrationFit, fit_sensor_model, usable_zones, zone_scores
 from nlosplan.calibration.model import CaptureSet
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.calibration.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
@@ -76,7 +76,7 @@ def fit_plane(captures: DistanceCaptures, arrivals, *, zones=(4,), iterations: i
         ps = fit_pulse_shape(captures, tb, ref_zone, indices=idx, min_distance_m=min_distance_m)
         shape, step, t0 = ps.samples, ps.step_ps, ps.t0_ps
         first["pulse_fwhm_ps"] = 20.0  # the shape already holds the pulse; the Gaussian only broadens it
-    fit = fit_calibration(cs, steps=steps, start={**first, **(start or {})}, pulse_shape=shape, pulse_step_ps=step,
+    fit = fit_sensor_model(cs, steps=steps, start={**first, **(start or {})}, pulse_shape=shape, pulse_step_ps=step,
                           pulse_t0_ps=t0, noise=noise)
     return fit, cs
 

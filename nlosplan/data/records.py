@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.data.dataset import LABEL_COLUMNS
 
@@ -165,10 +165,7 @@ def sensor_row(sensor: SensorConfig) -> tuple:
 
 
 def _check_labels(labels: dict, sensor: SensorConfig) -> dict:
-    unknown = sorted(set(labels) - set(_REQUIRED) - set(_OPTIONAL))
-    if unknown:
-        raise UserError(f"unknown capture label(s) {', '.join(unknown)}; "
-                        f"allowed: {', '.join(_REQUIRED + tuple(_OPTIONAL))}")
+    check_keys(labels, _REQUIRED + tuple(_OPTIONAL), "capture label(s)")
     missing = [k for k in _REQUIRED if labels.get(k) is None]
     if missing:
         raise UserError(f"capture labels miss {', '.join(missing)}")

@@ -35,7 +35,7 @@ from typing import Callable
 
 import numpy as np
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 
 __all__ = ["ActiveStudy", "prepare_world", "run_active_study", "summarise", "to_target"]
 
@@ -86,10 +86,7 @@ class ActiveStudy:
     @classmethod
     def from_dict(cls, d: dict) -> "ActiveStudy":
         """From a mapping (e.g. a TOML table); unknown keys are an error."""
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - names)
-        if bad:
-            raise UserError(f"unknown study setting(s) {', '.join(bad)}; allowed: {', '.join(sorted(names))}")
+        check_keys(d, sorted(f.name for f in fields(cls)), "study setting(s)")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 

@@ -39,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 from nlosplan.data.dataset import Dataset, scene_keys
 from nlosplan.data.load import load_dataset
 from nlosplan.tasks.names import DEFAULT_PATIENCE, DEFAULT_WIDTH, MODEL_NAMES, PROFILES, SMALL, SPLITS, TASKS, check_names
@@ -154,10 +154,7 @@ class JitterStudy:
     @classmethod
     def from_dict(cls, data: dict) -> "JitterStudy":
         """A study from a plain dict (e.g. a JSON config file); unknown keys are an error."""
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(data) - known)
-        if bad:
-            raise UserError(f"unknown jitter-study setting(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
+        check_keys(data, sorted(f.name for f in fields(cls)), "jitter-study setting(s)")
         return cls(**data)
 
     def to_dict(self) -> dict:
@@ -170,31 +167,9 @@ class JitterStudy:
 
 
 def load_study_dataset(store, where: dict | None = None, *, drop_backgrounds: bool = True) -> Dataset:
-    """The captures of a store the jitter study can use (:func:`~nlosplan.data.load.load_dataset`).
-
-    Parameters
-    ----------
-    store : str or Path
-        A :class:`~nlosplan.data.store.CaptureStore` file (not created).
-    where : dict, optional
-        Label filter as :meth:`CaptureStore.load <nlosplan.data.store.CaptureStore.load>`
-        takes it (a value may be a list). Without a ``zones`` entry the
-        study's zone mode :data:`STUDY_ZONES` (3x3) is used.
-    drop_backgrounds : bool
-        Leave out DENALI's background captures (class group ``"background"``:
-        no object, bare mount), which belong to none of the 30 shapes.
-
-    Returns
-    -------
-    Dataset
-        Histograms (N, rows, cols, bins), counts per capture (repeats kept).
-
-    Raises
-    ------
-    UserError
-        The store does not exist, holds no captures of the zone mode (the
-        message lists the modes it has), nothing matches the filter, or only
-        backgrounds match.
+    """The captures of a store the jitter study can use: :func:`~nlosplan.data.load.load_dataset` with the study's
+    zone mode :data:`STUDY_ZONES` (3x3) unless ``where`` names one, DENALI's background captures left out
+    (``drop_backgrounds``), and a message that says what the study needs when the store lacks that zone mode.
     """
     return load_dataset(store, where, default_zones=STUDY_ZONES, drop_backgrounds=drop_backgrounds,
                         zones_hint=f"the jitter study uses the centre zone of {STUDY_ZONES} captures (an odd zone "

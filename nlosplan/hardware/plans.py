@@ -143,16 +143,20 @@ def _pair(item, where: str) -> tuple[float, float]:
 
 
 def ask_tell_plan(suggest: Callable[[int], Sequence[tuple[float, float]]],
-                  tell: Callable[[list[tuple[tuple[float, float], list[CaptureResult]]]], None], *,
+                  ingest: Callable[[list[tuple[tuple[float, float], list[CaptureResult]]]], None], *,
                   batch: int = 1, repeats: int = 1, settle_s: float = 0.5, max_positions: int | None = None) -> Plan:
-    """Positions from a planner, in batches, with the results told back after each batch.
+    """Positions from a planner, in batches, with the results ingested back after each batch.
+
+    The executor side of the planners' ask/tell protocol (``suggest(n)`` /
+    ``ingest(results)``, :mod:`nlosplan.planner.protocol`), taken as two
+    callables so that this room needs no planner type.
 
     Parameters
     ----------
     suggest : callable
         ``suggest(n)`` returns up to ``n`` (x_mm, y_mm) positions; an empty
         list ends the plan.
-    tell : callable
+    ingest : callable
         Called with ``[((x_mm, y_mm), [CaptureResult, ...]), ...]`` for the batch.
         On resume the results come from the store (``resumed=True``), so a
         deterministic planner makes the same suggestions again and the run
@@ -173,7 +177,7 @@ def ask_tell_plan(suggest: Callable[[int], Sequence[tuple[float, float]]],
             results = yield from _capture_at(x, y, repeats, settle_s)
             told.append(((x, y), results))
             done += 1
-        tell(told)
+        ingest(told)
 
 
 def finalize_wrapper(plan: Plan, final: Callable[[], Plan]) -> Plan:

@@ -23,8 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from nlosplan.constants import FWHM_PER_SIGMA, MAX_COUNT_24BIT
-from nlosplan.errors import UserError
+from nlosplan.constants import MAX_COUNT_24BIT
+from nlosplan.errors import UserError, check_keys
+from nlosplan.sensor_models.impulse import impulse_sigma_ps
 
 FLASH_PROFILES = ("gaussian", "uniform")
 MAX_ZONES_PER_AXIS = 16
@@ -157,7 +158,7 @@ class SensorConfig:
 
         ``sqrt(sigma_pulse**2 + sigma_jitter**2)`` with sigma = FWHM / 2.3548.
         """
-        return math.hypot(self.pulse_fwhm_ps, self.jitter_fwhm_ps) / FWHM_PER_SIGMA
+        return impulse_sigma_ps(self.pulse_fwhm_ps, self.jitter_fwhm_ps)
 
     @property
     def max_count(self) -> int:
@@ -177,12 +178,7 @@ class SensorConfig:
         UserError
             For unknown field names or invalid values.
         """
-        known = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - known)
-        if unknown:
-            raise UserError(
-                f"unknown sensor parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(known))}"
-            )
+        check_keys(changes, sorted(f.name for f in dataclasses.fields(self)), "sensor parameter(s)")
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
@@ -203,12 +199,7 @@ class SensorConfig:
         """
         if not isinstance(data, dict):
             raise UserError("a sensor configuration must be a table/object of parameters")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise UserError(
-                f"unknown sensor parameter(s) {', '.join(unknown)}; allowed: {', '.join(sorted(known))}"
-            )
+        check_keys(data, sorted(f.name for f in dataclasses.fields(cls)), "sensor parameter(s)")
         data = dict(data)
         if isinstance(data.get("pulse_shape"), list):
             data["pulse_shape"] = tuple(data["pulse_shape"])

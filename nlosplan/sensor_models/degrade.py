@@ -28,12 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nlosplan.constants import FWHM_PER_SIGMA
 from nlosplan.errors import UserError
+from nlosplan.sensor_models.impulse import impulse_fwhm_ps
 
 __all__ = ["Degradation", "reach", "degrade_expected", "degrade_linear", "degrade_counts", "jitter_kernel",
            "pool_zones", "merge_bins"]
-
-_FWHM = 2.0 * math.sqrt(2.0 * math.log(2.0))
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,7 @@ def reach(captured, design, *, counts: bool = True) -> tuple[Degradation | None,
                       f"{captured.n_bins * captured.bin_width_ps / 1000:.2f} ns")
     j0, j1 = captured.jitter_fwhm_ps, design.jitter_fwhm_ps
     p0, p1 = captured.pulse_fwhm_ps, design.pulse_fwhm_ps
-    blur0, blur1 = math.hypot(j0, p0), math.hypot(j1, p1)
+    blur0, blur1 = impulse_fwhm_ps(p0, j0), impulse_fwhm_ps(p1, j1)
     if blur1 < blur0 - 1e-9:
         return None, (f"timing blur {blur1:g} ps FWHM (jitter {j1:g}, pulse {p1:g}) is sharper than the "
                       f"captured {blur0:g} ps")
@@ -154,7 +154,7 @@ def jitter_kernel(fwhm_ps: float, bin_width_ps: float, *, cutoff_sigmas: float =
     """
     from scipy.special import erf
 
-    sigma = fwhm_ps / _FWHM / bin_width_ps  # in bins
+    sigma = fwhm_ps / FWHM_PER_SIGMA / bin_width_ps  # in bins
     if sigma <= 0:
         return np.ones(1), 0
     half = max(1, int(math.ceil(cutoff_sigmas * sigma + 1)))

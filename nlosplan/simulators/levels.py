@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 
 
 def resolve_level(value: Any, levels: dict, cls: type, what: str):
@@ -28,10 +28,7 @@ def resolve_level(value: Any, levels: dict, cls: type, what: str):
             raise UserError(f"unknown {what} {value!r}; allowed: {', '.join(levels)}")
         return levels[value]
     if isinstance(value, dict):
-        known = {f.name for f in dataclasses.fields(cls)}
-        bad = sorted(set(value) - known)
-        if bad:
-            raise UserError(f"unknown {what} knob(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
+        check_keys(value, sorted(f.name for f in dataclasses.fields(cls)), f"{what} knob(s)")
         return cls(**value)
     raise UserError(f"{what} must be a level name ({', '.join(levels)}), a dict of knobs or a {cls.__name__}, "
                     f"not {value!r}")

@@ -21,7 +21,7 @@ Settings ("profiles")
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -31,11 +31,11 @@ from nlosplan.errors import UserError
 from nlosplan.data.dataset import Dataset
 from nlosplan.tasks.metrics import BREAKDOWNS, breakdown_rows, position_quadrants
 from nlosplan.tasks.models import MODEL_NAMES, TASK_LABEL, TASKS, check_names, n_parameters
-from nlosplan.tasks.splits import SPLITS, make_split, split_applies
+from nlosplan.tasks.splits import SPLITS, Split, make_split, split_applies
 from nlosplan.tasks.training import TrainConfig, save_checkpoint, train_model
 
-__all__ = ["DENALI_CELLS", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE", "DEFAULT_WIDTH", "PROFILES", "SMALL", "denali_config",
-           "run_benchmark", "train_config"]
+__all__ = ["DENALI_CELLS", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE", "DEFAULT_WIDTH", "PROFILES", "SMALL", "TaskData",
+           "denali_config", "run_benchmark", "task_classes", "task_data", "train_config"]
 
 from nlosplan.tasks.names import (  # noqa: E402,F401 (re-exported)
     DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, PROFILES, SMALL,
@@ -122,6 +122,61 @@ def _targets(ds: Dataset, task: str, classes) -> np.ndarray:
     return np.array([lookup[v] for v in ds.labels[TASK_LABEL[task]].astype(str)], dtype=np.int64)
 
 
+def task_classes(ds: Dataset, task: str) -> tuple[str, ...] | None:
+    """Class names of a classification task in ``ds``, sorted (the models' output order); None for ``"loc"``."""
+    return None if task == "loc" else tuple(sorted(ds.labels[TASK_LABEL[task]].astype(str).unique()))
+
+
+@dataclass(frozen=True, eq=False)
+class TaskData:
+    """One task's train and test rows and their targets.
+
+    Attributes
+    ----------
+    train, test : Dataset
+    y_train : ndarray
+        (N, 2) x, y in metres for ``"loc"``; class names (N,) otherwise.
+    y_test : ndarray
+        (M, 2) x, y in metres for ``"loc"``; class indices (M,) otherwise.
+    split : Split
+    """
+
+    train: Dataset
+    test: Dataset
+    y_train: np.ndarray
+    y_test: np.ndarray
+    split: Split
+
+
+def task_data(ds: Dataset, task: str, split: str, *, seed: int, test_size: float = 0.3,
+              classes: tuple[str, ...] | None = None) -> TaskData:
+    """Split ``ds`` for one task and take its targets (the benchmark's data, also the design evaluator's).
+
+    Parameters
+    ----------
+    ds : Dataset
+    task : {"loc", "shape", "size"}
+    split : str
+        One of :data:`~nlosplan.tasks.splits.SPLITS` that applies to ``task``.
+    seed : int
+    test_size : float
+    classes : tuple of str, optional
+        The task's classes (:func:`task_classes` of the whole dataset).
+
+    Raises
+    ------
+    UserError
+        The split leaves fewer than 2 training or no test rows, or localization rows without x, y.
+    """
+    sp = make_split(ds, split, task, seed=seed, test_size=test_size)
+    if len(sp.train) < 2 or len(sp.test) < 1:
+        raise UserError(f"split {split!r} leaves {len(sp.train)} training and {len(sp.test)} test rows")
+    train, test = ds.take(sp.train), ds.take(sp.test)
+    y_train = (_targets(train, task, classes) if task == "loc"
+               else train.labels[TASK_LABEL[task]].astype(str).to_numpy())
+    return TaskData(train, test, y_train, _targets(test, task, classes), sp)
+
+
 def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, tasks: Sequence[str] = TASKS,
                   split: str = "random", seed: int = 42, epochs: int | None = None, width: float = DEFAULT_WIDTH,
                   average_repeats: bool = True, profile: str = "cpu", patience: int | None = DEFAULT_PATIENCE,
@@ -190,7 +245,7 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
     ds = dataset.mean_over_repeats() if average_repeats else dataset
     need_quadrant = any(c == "quadrant" for t in tasks for c, _ in BREAKDOWNS[t])
     quadrant = _quadrants(ds.labels) if need_quadrant else None
-    classes = {t: tuple(sorted(ds.labels[TASK_LABEL[t]].astype(str).unique())) for t in tasks if t != "loc"}
+    classes = {t: task_classes(ds, t) for t in tasks if t != "loc"}
     for t, names in classes.items():
         if len(names) < 2:
             raise UserError(f"task {t!r} needs at least 2 classes of {TASK_LABEL[t]}; the dataset has {', '.join(names)}")
@@ -200,14 +255,9 @@ def run_benchmark(dataset: Dataset, *, models: Sequence[str] = MODEL_NAMES, task
     say = progress or (lambda _event: None)
     for ti, task in enumerate(tasks):
         why = split_applies(split, task)
-        sp = None if why else make_split(ds, split, task, seed=seed, test_size=test_size)
-        if sp is not None and (len(sp.train) < 2 or len(sp.test) < 1):
-            raise UserError(f"split {split!r} leaves {len(sp.train)} training and {len(sp.test)} test rows")
-        if sp is not None:  # the same data for every model of this task
-            train, test = ds.take(sp.train), ds.take(sp.test)
-            y_train = (_targets(train, task, classes.get(task)) if task == "loc"
-                       else train.labels[TASK_LABEL[task]].astype(str).to_numpy())
-            y_test = _targets(test, task, classes.get(task))
+        if not why:  # the same data for every model of this task
+            data = task_data(ds, task, split, seed=seed, test_size=test_size, classes=classes.get(task))
+            train, test, y_train, y_test, sp = data.train, data.test, data.y_train, data.y_test, data.split
             q_test = None if quadrant is None else quadrant[sp.test]
         for mi, model in enumerate(models):
             index = ti * len(models) + mi

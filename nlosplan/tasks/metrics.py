@@ -1,6 +1,9 @@
-"""Metrics of the DENALI benchmark table, overall and by group.
+"""The scoring module: DENALI's metrics, overall and by group, for every room that scores a model.
 
-Definitions are DENALI's (``benchmark/main_table/metrics.py``):
+Used by the benchmark (:mod:`nlosplan.tasks.benchmark`), the jitter study
+(through the benchmark) and the design planner's trained evaluator
+(:mod:`nlosplan.planner.design.evaluators`). Definitions are DENALI's
+(``benchmark/main_table/metrics.py``):
 
 - classification: top-1 accuracy (argmax), top-k accuracy with
   ``k = min(5, classes)`` (the true class among the k largest scores),
@@ -9,6 +12,11 @@ Definitions are DENALI's (``benchmark/main_table/metrics.py``):
 - localization: errors of (x, y) in metres, pooled over both coordinates:
   ``rmse = sqrt(mean((pred - true)**2))`` and ``mae = mean(|pred - true|)``
   over the N x 2 entries (not the Euclidean distance), plus per-axis MSE/MAE.
+
+One more localization figure, not DENALI's, under its own name:
+:func:`loc_rms_distance`, the RMS of the 2-D Euclidean error
+``sqrt(mean(|pred - true|^2))`` (= sqrt(2) x the pooled ``rmse``), which the
+design planner's requirements are stated in today.
 
 Breakdowns (the paper's table)
 ------------------------------
@@ -36,14 +44,16 @@ the wall), far is x above and y below.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 from sklearn.metrics import f1_score, precision_score, recall_score
 
 from nlosplan.errors import UserError
 
-__all__ = ["BREAKDOWNS", "METRICS", "breakdown_rows", "classification_metrics", "position_quadrants",
-           "regression_metrics"]
+__all__ = ["BREAKDOWNS", "METRICS", "breakdown_rows", "classification_metrics", "loc_rms_distance",
+           "position_quadrants", "regression_metrics", "top1_accuracy"]
 
 #: Metrics shown per task, in table order (DENALI's key names; size accuracy is ``top1_acc``).
 METRICS: dict[str, tuple[str, ...]] = {
@@ -57,6 +67,35 @@ BREAKDOWNS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
     "shape": (("quadrant", ("near", "far")), ("size", ("4in", "8in"))),
     "size": (("quadrant", ("near", "far")), ("class_group", ("numbers", "letters", "shapes"))),
 }
+
+
+def top1_accuracy(scores, targets) -> float:
+    """Fraction of rows whose largest score is the true class (DENALI's ``top1_acc``).
+
+    Parameters
+    ----------
+    scores : array_like, shape (N, C)
+        Logits or probabilities.
+    targets : array_like of int, shape (N,)
+        True class indices.
+    """
+    return float((np.argmax(scores, axis=1) == np.asarray(targets)).mean())
+
+
+def loc_rms_distance(predictions, targets) -> float:
+    """RMS of the 2-D (Euclidean) localization error, metres: ``sqrt(mean_i |pred_i - true_i|^2)``.
+
+    Not DENALI's ``rmse`` (which pools x and y: ``sqrt(mean((pred - true)**2))``
+    over the N x 2 entries, :func:`regression_metrics`); this one is
+    ``sqrt(2)`` times larger for the same errors.
+
+    Parameters
+    ----------
+    predictions, targets : array_like, shape (N, 2)
+        (x, y) in metres.
+    """
+    d = np.asarray(predictions, dtype=np.float64) - np.asarray(targets, dtype=np.float64)
+    return math.sqrt(float((d ** 2).sum(axis=1).mean()))
 
 
 def classification_metrics(scores, targets, *, top_k: int | None = None) -> dict[str, float]:
@@ -95,7 +134,7 @@ def classification_metrics(scores, targets, *, top_k: int | None = None) -> dict
     pred = s.argmax(axis=1)
     topk = np.argpartition(-s, kth=k - 1, axis=1)[:, :k]
     return {
-        "top1_acc": float((pred == t).mean()),
+        "top1_acc": top1_accuracy(s, t),
         "top5_acc": float((topk == t[:, None]).any(axis=1).mean()),
         "macro_f1": float(f1_score(t, pred, average="macro", zero_division=0)),
         "macro_precision": float(precision_score(t, pred, average="macro", zero_division=0)),

@@ -10,7 +10,7 @@
 """
 
 from nlosplan.planner.capture.batch import batch_information, select_batch
-from nlosplan.planner.capture.calibration import calibration_error, fit_calibration
+from nlosplan.planner.capture.calibration import calibration_error, fit_counts_model
 from nlosplan.planner.capture.doptimal import relaxed_doptimal, round_design
 from nlosplan.planner.capture.ensemble import EnsembleLocalizer
 from nlosplan.planner.capture.keepout import (Candidates, direct_view_zones, grid_points, region_points,
@@ -23,6 +23,6 @@ from nlosplan.planner.capture.strategies import STRATEGIES
 
 __all__ = ["CALIBRATION_PARAMETERS", "STRATEGIES", "Candidates", "CandidateSpace", "CapturePlanner",
            "EnsembleLocalizer", "MotionModel", "PlannerConfig", "batch_information", "build_space",
-           "calibration_error", "denali_scene_fn", "direct_view_zones", "fit_calibration", "grid_points",
+           "calibration_error", "denali_scene_fn", "direct_view_zones", "fit_counts_model", "grid_points",
            "order_batch", "region_points", "relaxed_doptimal", "round_design", "screen_candidates",
            "select_batch"]

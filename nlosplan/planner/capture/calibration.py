@@ -14,7 +14,7 @@ import numpy as np
 
 from nlosplan.tasks.fisher import analyse_fisher
 
-__all__ = ["DEFAULT_PRIOR_STD", "DEFAULT_TOLERANCE", "calibration_error", "fit_calibration", "prior_information"]
+__all__ = ["DEFAULT_PRIOR_STD", "DEFAULT_TOLERANCE", "calibration_error", "fit_counts_model", "prior_information"]
 
 #: Prior standard deviation of each parameter: 1 cm offsets, factors within about e^0.5.
 DEFAULT_PRIOR_STD = np.array([0.01, 0.01, 0.5, 0.5])
@@ -27,9 +27,9 @@ def prior_information(prior_std=DEFAULT_PRIOR_STD) -> np.ndarray:
     return np.diag(1.0 / np.asarray(prior_std, dtype=np.float64) ** 2)
 
 
-def fit_calibration(space, index, observations, *, theta0=None, prior_std=DEFAULT_PRIOR_STD,
-                    iterations: int = 30) -> dict:
-    """Maximum-likelihood calibration from observations at candidates.
+def fit_counts_model(space, index, observations, *, theta0=None, prior_std=DEFAULT_PRIOR_STD,
+                     iterations: int = 30) -> dict:
+    """Maximum-likelihood fit of the counts model's parameters (dx, dy, log photon scale, log albedo) to observations.
 
     Parameters
     ----------

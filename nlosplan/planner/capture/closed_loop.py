@@ -1,10 +1,10 @@
-"""The planner in closed loop with a rig: suggest/tell callables for an ask/tell capture plan.
+"""The planner in closed loop with a rig: suggest/ingest callables for an ask/tell capture plan.
 
 :class:`ClosedLoop` adapts a :class:`~nlosplan.planner.capture.planner.CapturePlanner`
 to :func:`nlosplan.hardware.plans.ask_tell_plan` (which yields the moves and
 captures; the executor runs them): ``suggest(n)`` asks the planner for a
-batch (and, with an approval callback, asks a person first), ``tell``
-averages each position's repeats, ingests them, refits the model and the
+batch (and, with an approval callback, asks a person first), ``ingest``
+averages each position's repeats, ingests them into the planner, refits the model and the
 calibration, records the progress, checkpoints the planner, and stops the
 loop when the localization target is reached. The target is checked on a
 cross-validated RMSE of the ensemble localizer over the captures so far (a
@@ -43,7 +43,7 @@ def cv_rmse(planner, folds: int = 5, seed: int = 0) -> float:
 
 
 class ClosedLoop:
-    """Suggest/tell callables around a capture planner.
+    """Suggest/ingest callables around a capture planner (:class:`~nlosplan.planner.protocol.AskTellPlanner`).
 
     Parameters
     ----------
@@ -82,7 +82,7 @@ class ClosedLoop:
         self._pending = batch
         return [(p["x_mm"], p["y_mm"]) for p in batch]
 
-    def tell(self, told) -> None:
+    def ingest(self, told) -> None:
         """Ingest ``[((x, y), [CaptureResult, ...]), ...]`` in the order suggested."""
         if len(told) != len(self._pending):
             raise UserError(f"the plan told {len(told)} positions back for a batch of {len(self._pending)}")

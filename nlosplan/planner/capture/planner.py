@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosplan.errors import UserError
-from nlosplan.planner.capture.calibration import (DEFAULT_PRIOR_STD, fit_calibration, prior_information)
+from nlosplan.planner.capture.calibration import (DEFAULT_PRIOR_STD, fit_counts_model, prior_information)
 from nlosplan.planner.capture.ensemble import EnsembleLocalizer
 from nlosplan.planner.capture.motion import MotionModel
 from nlosplan.planner.capture.route import order_batch
@@ -141,7 +141,7 @@ class CapturePlanner:
     def calibration(self) -> dict:
         """Maximum-likelihood calibration from the observations (cached until the next ingest)."""
         if self._calib is None:
-            self._calib = fit_calibration(self.space, self.captured, self._observed())
+            self._calib = fit_counts_model(self.space, self.captured, self._observed())
         return self._calib
 
     def localizer(self) -> EnsembleLocalizer:
@@ -208,7 +208,7 @@ class CapturePlanner:
             out.append({k2: v for k2, v in prop.items() if k2 != "status"})
         return out
 
-    # ------------------------------------------------------------------ tell
+    # ------------------------------------------------------------------ ingest
     def ingest(self, results) -> None:
         """Record capture results.
 

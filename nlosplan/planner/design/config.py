@@ -29,7 +29,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
@@ -80,9 +80,7 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
         raise UserError(f"configuration file {p} does not exist") from None
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise UserError(f"cannot read {p}: {exc}") from None
-    bad = sorted(set(data) - {"space", "requirements", "cost", "search", "scenes"})
-    if bad:
-        raise UserError(f"{p}: unknown table(s) {', '.join(bad)}; allowed: space, requirements, cost, search, scenes")
+    check_keys(data, ("space", "requirements", "cost", "search", "scenes"), "table(s)", prefix=f"{p}: ")
     cfg = base
     if "space" in data:
         cfg = replace(cfg, space=DesignSpace.from_dict({**base.space.to_dict(), **_table(data, "space")}))
@@ -99,9 +97,7 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
     if "search" in data:
         s = dict(_table(data, "search"))
         given = s.pop("fidelity", {})
-        bad = sorted(set(given) - set(base.search.fidelity))
-        if bad:
-            raise UserError(f"{p}: unknown evaluator(s) {', '.join(bad)} in [search.fidelity]; allowed: bound, trained")
+        check_keys(given, tuple(base.search.fidelity), "evaluator(s)", prefix=f"{p}: ", suffix=" in [search.fidelity]")
         fid = {k: {**v, **given.get(k, {})} for k, v in base.search.fidelity.items()}
         try:
             cfg = replace(cfg, search=replace(base.search, fidelity=fid, **s))

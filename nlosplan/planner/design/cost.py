@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
+from nlosplan.sensor_models.impulse import impulse_fwhm_ps
 
 __all__ = ["CostModel"]
 
@@ -41,8 +42,8 @@ class CostModel:
     def terms(self, design, space) -> dict[str, float]:
         """Cost of each spec of ``design`` above the cheapest of ``space``."""
         max_zones = min(r * c for r, c in space.zones)
-        blur = max(math.hypot(design.jitter_fwhm_ps, design.pulse_fwhm_ps), _BLUR_FLOOR_PS)
-        worst_blur = max(math.hypot(space.jitter_fwhm_ps[1], space.pulse_fwhm_ps[1]), _BLUR_FLOOR_PS)
+        blur = max(impulse_fwhm_ps(design.pulse_fwhm_ps, design.jitter_fwhm_ps), _BLUR_FLOOR_PS)
+        worst_blur = max(impulse_fwhm_ps(space.pulse_fwhm_ps[1], space.jitter_fwhm_ps[1]), _BLUR_FLOOR_PS)
         return {
             "zones": self.zones * math.log2(design.n_zones / max_zones),
             "n_bins": self.n_bins * math.log2(max(design.n_bins, 1) / max(space.n_bins[0], 1)),
@@ -59,7 +60,5 @@ class CostModel:
 
     @classmethod
     def from_dict(cls, data: dict) -> "CostModel":
-        bad = sorted(set(data) - set(asdict(cls())))
-        if bad:
-            raise UserError(f"unknown cost weight(s) {', '.join(bad)}; allowed: {', '.join(asdict(cls()))}")
+        check_keys(data, tuple(asdict(cls())), "cost weight(s)")
         return cls(**{k: float(v) for k, v in data.items()})

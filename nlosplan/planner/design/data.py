@@ -28,7 +28,8 @@ from nlosplan.sensor_models.degrade import Degradation, degrade_counts, degrade_
 
 __all__ = ["SceneSet", "ReferenceData", "simulate_reference", "reference_from_dataset", "load_reference"]
 
-LABEL_COLUMNS = ("object", "size", "class_group", "position", "x", "y", "lights")
+#: Label columns a reference keeps (a subset of the data room's LABEL_COLUMNS).
+REFERENCE_COLUMNS = ("object", "size", "class_group", "position", "x", "y", "lights")
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,7 @@ class ReferenceData:
     sensor : SensorConfig
         The reference sensor these histograms belong to.
     labels : pandas.DataFrame
-        One row per scene (or capture): :data:`LABEL_COLUMNS`.
+        One row per scene (or capture): :data:`REFERENCE_COLUMNS`.
     means : ndarray, shape (N, R, C, B) or None
         Expected counts (simulated references).
     counts : ndarray, shape (N, R, C, B) or None
@@ -183,7 +184,7 @@ def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
     xy = positions_xy()
     rows = [{"object": o, "size": s, "class_group": class_group(o), "position": p, "x": float(xy[p, 0]),
              "y": float(xy[p, 1]), "lights": lights} for o in objects for s in sizes for p in positions]
-    return pd.DataFrame(rows, columns=list(LABEL_COLUMNS))
+    return pd.DataFrame(rows, columns=list(REFERENCE_COLUMNS))
 
 
 def _twin_expected(scene, sensor: SensorConfig, fidelity: str) -> np.ndarray:
@@ -262,8 +263,8 @@ def reference_from_dataset(dataset, sensor: SensorConfig, source: str) -> Refere
     if np.any(h < 0) or not np.allclose(h, np.round(h)):
         raise UserError("real captures must be photon counts (non-negative integers)")
     labels = dataset.labels.reset_index(drop=True)
-    missing = [c for c in LABEL_COLUMNS if c not in labels.columns]
+    missing = [c for c in REFERENCE_COLUMNS if c not in labels.columns]
     if missing:
         raise UserError(f"captures lack label column(s) {', '.join(missing)}")
-    return ReferenceData(sensor, labels[list(LABEL_COLUMNS)].copy(), counts=np.round(h).astype(np.int64),
+    return ReferenceData(sensor, labels[list(REFERENCE_COLUMNS)].copy(), counts=np.round(h).astype(np.int64),
                          source=source)

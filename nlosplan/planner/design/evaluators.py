@@ -19,24 +19,26 @@ Evaluators
 ``trained``
     DENALI's MLP trained on noisy captures of the design (repeats averaged),
     random 70/30 split by scene, metric on the test scenes; interval by
-    bootstrap over the test scenes.
+    bootstrap over the test scenes. The split, targets, training settings and
+    training are the benchmark's (:func:`~nlosplan.tasks.benchmark.task_data`,
+    :func:`~nlosplan.tasks.benchmark.train_config`,
+    :func:`~nlosplan.tasks.training.train_model`); the metrics are the
+    scoring module's (:mod:`nlosplan.tasks.metrics`: ``loc_rms_distance``,
+    ``top1_acc``).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 
 from nlosplan.planner.design.data import load_reference
-from nlosplan.planner.design.requirements import METRIC_OF_TASK
-from nlosplan.planner.design.space import Design
+from nlosplan.planner.design.jobs import DesignJob
+from nlosplan.planner.design.requirements import METRIC_OF_TASK, Condition
 
-__all__ = ["job_key", "evaluate", "DEFAULT_FIDELITY"]
+__all__ = ["evaluate", "DEFAULT_FIDELITY"]
 
 #: Knobs of each evaluator (the error-against-run-time axis of the report).
 DEFAULT_FIDELITY: dict[str, dict] = {
@@ -45,22 +47,8 @@ DEFAULT_FIDELITY: dict[str, dict] = {
 }
 
 
-def job_key(job: dict) -> str:
-    """A stable id of an evaluation (what resume looks up)."""
-    fields = {k: job[k] for k in ("evaluator", "task", "design", "seed", "fidelity", "condition")}
-    fields["reference"] = Path(job["reference"]).name  # names carry the content hash: a moved OUT still resumes
-    return hashlib.sha1(json.dumps(fields, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-def _rows(labels, condition) -> np.ndarray:
-    if not condition:
-        return np.ones(len(labels), bool)
-    col, val = condition.split("=", 1)
-    if col == "quadrant":
-        from nlosplan.tasks.metrics import position_quadrants
-
-        return position_quadrants(labels)["quadrant"].to_numpy() == val
-    return labels[col].astype(str).to_numpy() == val
+def _rows(labels, condition: Condition | None) -> np.ndarray:
+    return np.ones(len(labels), bool) if condition is None else condition.mask(labels)
 
 
 def _crlb(ref, deg, repeats: int, condition) -> tuple[float, str]:
@@ -118,10 +106,9 @@ def _bootstrap(values_fn, n: int, draws: int, seed: int) -> tuple[float, float]:
 def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[float, tuple[float, float], dict]:
     import torch
 
-    from nlosplan.tasks.benchmark import train_config
     from nlosplan.data.dataset import Dataset
-    from nlosplan.tasks.models import TASK_LABEL
-    from nlosplan.tasks.splits import make_split
+    from nlosplan.tasks.benchmark import task_classes, task_data, train_config
+    from nlosplan.tasks.metrics import loc_rms_distance, top1_accuracy
     from nlosplan.tasks.training import train_model
 
     torch.set_num_threads(1)
@@ -132,25 +119,15 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     labels["repeat"] = -1
     labels["source"] = ref.source
     ds = Dataset(hist, labels, deg.bin_width_ps)
-    sp = make_split(ds, "random", task, seed=seed)
-    train, test = ds.take(sp.train), ds.take(sp.test)
+    classes = task_classes(ds, task)
+    data = task_data(ds, task, "random", seed=seed, classes=classes)
     cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
-    if task == "loc":
-        y_train = train.labels[["x", "y"]].to_numpy(np.float64)
-    else:
-        y_train = train.labels[TASK_LABEL[task]].astype(str).to_numpy()
-    classes = None if task == "loc" else tuple(sorted(ds.labels[TASK_LABEL[task]].astype(str).unique()))
-    model = train_model(train.histograms, y_train, model=fid["model"], task=task, config=cfg,
+    model = train_model(data.train.histograms, data.y_train, model=fid["model"], task=task, config=cfg,
                         width=float(fid["width"]), classes=classes)
-    keep = _rows(test.labels, condition)
-    scores = model.predict(test.histograms)[keep]
-    if task == "loc":
-        err2 = ((scores - test.labels[["x", "y"]].to_numpy(np.float64)[keep]) ** 2).sum(axis=1)
-        stat = lambda i: math.sqrt(float(err2[i].mean()))  # noqa: E731 -- RMS of the 2-D error, as DENALI
-    else:
-        truth = np.array([classes.index(v) for v in test.labels[TASK_LABEL[task]].astype(str).to_numpy()[keep]])
-        hit = (np.argmax(scores, axis=1) == truth).astype(float)
-        stat = lambda i: float(hit[i].mean())  # noqa: E731
+    keep = _rows(data.test.labels, condition)
+    scores, truth = model.predict(data.test.histograms)[keep], data.y_test[keep]
+    score = loc_rms_distance if task == "loc" else top1_accuracy
+    stat = lambda i: score(scores[i], truth[i])  # noqa: E731
     n = int(keep.sum())
     if n == 0:
         return math.nan, (math.nan, math.nan), {}
@@ -160,47 +137,44 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
                              "train_seconds": float(model.train_seconds)}
 
 
-def evaluate(job: dict) -> dict:
+def evaluate(job: DesignJob) -> dict:
     """Run one evaluation.
 
     Parameters
     ----------
-    job : dict
+    job : DesignJob
         ``evaluator`` (``"bound"``, ``"trained"``, or ``"trained_sim"``: trained on
-        simulated captures when ``trained`` reads real ones), ``task``, ``design``
-        (:meth:`Design.to_dict`), ``seed``, ``fidelity`` (dict of knobs),
-        ``condition`` (``"col=value"`` or None), ``reference`` (path of the
-        saved :class:`~nlosplan.planner.design.data.ReferenceData` of the
-        design's zone layout), ``reference_sensor`` (the space's reference,
-        a dict).
+        simulated captures when ``trained`` reads real ones), ``task``, ``design``,
+        ``seed``, ``fidelity`` (dict of knobs), ``condition`` (a :class:`Condition`
+        or None), ``reference`` (path of the saved
+        :class:`~nlosplan.planner.design.data.ReferenceData` of the design's zone
+        layout), ``reference_sensor`` (the space's reference, a dict).
 
     Returns
     -------
     dict
-        The job's fields plus ``key``, ``metric``, ``value``, ``lo``, ``hi``,
-        ``seconds``, ``status`` and ``reason``, and ``extra`` details.
+        The job's fields (:meth:`DesignJob.to_dict`, with ``key``) plus ``metric``,
+        ``value``, ``lo``, ``hi``, ``seconds``, ``status`` and ``reason``, and
+        ``extra`` details.
     """
     from nlosplan.sensor_models import SensorConfig
 
     t0 = time.perf_counter()
-    out = {**job, "key": job_key(job), "metric": METRIC_OF_TASK[job["task"]][0], "value": math.nan,
-           "lo": math.nan, "hi": math.nan, "status": "ok", "reason": "", "extra": {}}
+    out = {**job.to_dict(), "metric": METRIC_OF_TASK[job.task][0], "value": math.nan, "lo": math.nan,
+           "hi": math.nan, "status": "ok", "reason": "", "extra": {}}
     try:
-        design = Design.from_dict(job["design"])
-        ref = load_reference(job["reference"])
-        deg, why = ref.degradation(design.sensor(SensorConfig.from_dict(job["reference_sensor"])))
+        ref = load_reference(job.reference)
+        deg, why = ref.degradation(job.design.sensor(SensorConfig.from_dict(job.reference_sensor)))
         if deg is None:
             out.update(status="unreachable", reason=why)
-        elif job["evaluator"] == "bound" and job["task"] == "loc":
-            value, note = _crlb(ref, deg, int(job["fidelity"].get("crlb_repeats", 1)), job["condition"])
+        elif job.evaluator == "bound" and job.task == "loc":
+            value, note = _crlb(ref, deg, int(job.fidelity.get("crlb_repeats", 1)), job.condition)
             out.update(value=value, lo=value, hi=value, reason=note)
-        elif job["evaluator"] == "bound":
-            value, (lo, hi) = _observer(ref, deg, job["task"], int(job["fidelity"]["draws"]), int(job["seed"]),
-                                        job["condition"])
+        elif job.evaluator == "bound":
+            value, (lo, hi) = _observer(ref, deg, job.task, int(job.fidelity["draws"]), int(job.seed), job.condition)
             out.update(value=value, lo=lo, hi=hi)
         else:
-            value, (lo, hi), extra = _trained(ref, deg, job["task"], job["fidelity"], int(job["seed"]),
-                                              job["condition"])
+            value, (lo, hi), extra = _trained(ref, deg, job.task, job.fidelity, int(job.seed), job.condition)
             out.update(value=value, lo=lo, hi=hi, extra=extra)
     except Exception as exc:  # recorded, never fatal to the search
         out.update(status="failed", reason=f"{type(exc).__name__}: {exc}")

@@ -1,9 +1,9 @@
 """Where evaluations run: this process, a local process pool, or a Dask cluster.
 
-Every executor takes plain-dict jobs and a module-level function and yields
-``(job, result)`` as results arrive, so the search does not care where they
-ran. A job that raises is yielded with an ``{"status": "failed"}`` result;
-it never stops the others.
+Every executor takes picklable jobs (:mod:`~nlosplan.planner.design.jobs`)
+and a module-level function and yields ``(job, result)`` as results arrive,
+so the search does not care where they ran. A job that raises is yielded
+with an ``{"status": "failed"}`` result; it never stops the others.
 
 ``--cluster tcp://HOST:PORT`` connects to a running Dask scheduler (its
 workers must see the run's output folder, where the reference data lies);
@@ -16,15 +16,16 @@ from __future__ import annotations
 import multiprocessing
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from typing import Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from nlosplan.errors import UserError
 
 __all__ = ["make_executor", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
 
 
-def _failed(job: dict, exc: BaseException) -> dict:
-    return {**job, "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
+def _failed(job, exc: BaseException) -> dict:
+    """The result record of a job that raised (the job's fields, ``status`` and ``reason``)."""
+    return {**job.to_dict(), "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
 
 
 class SerialExecutor:
@@ -33,7 +34,7 @@ class SerialExecutor:
     name = "serial"
     workers = 1
 
-    def map(self, fn: Callable[[dict], dict], jobs: Iterable[dict]) -> Iterator[tuple[dict, dict]]:
+    def map(self, fn: Callable[[Any], dict], jobs: Iterable[Any]) -> Iterator[tuple[Any, dict]]:
         for job in jobs:
             try:
                 yield job, fn(job)

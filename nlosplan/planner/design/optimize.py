@@ -7,8 +7,8 @@ number of bins — to minimize the design's cost subject to the requirement
 being met by the bound corrected with the measured bound-to-trained gap
 (:meth:`~nlosplan.planner.design.search.DesignSearch.predict`). The costliest
 corner is tried first: if even it misses, the choice is infeasible and
-nothing else is evaluated. Jobs are plain dicts (:func:`optimize_choice`),
-so the choices run in parallel on any executor.
+nothing else is evaluated. Jobs are :class:`~nlosplan.planner.design.jobs.OptimizeJob`
+(typed, picklable), so the choices run in parallel on any executor.
 """
 
 from __future__ import annotations
@@ -18,16 +18,15 @@ import time
 
 import numpy as np
 
-from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluators import evaluate
-from nlosplan.planner.design.requirements import Requirement
+from nlosplan.planner.design.jobs import OptimizeJob
 from nlosplan.planner.design.search import metric_to_score, score_to_metric
 from nlosplan.planner.design.space import Design, DesignSpace
 
 __all__ = ["optimize_jobs", "optimize_choice", "collect_candidates"]
 
 
-def optimize_jobs(search) -> list[dict]:
+def optimize_jobs(search) -> list[OptimizeJob]:
     """One job per (requirement, zones, bin width) for :func:`optimize_choice`."""
     jobs = []
     for req in search.requirements:
@@ -36,11 +35,9 @@ def optimize_jobs(search) -> list[dict]:
             for f in search.space.bin_factors:
                 base = search.base.replace(zones=z, bin_factor=f, n_bins=search.space.max_bins(f))
                 proto = search.job("bound", req, base)
-                jobs.append({"requirement": req.to_dict(), "gap": gap, "space": search.space.to_dict(),
-                             "space_reference": search.space.sensor.to_dict(), "cost": search.cost.to_dict(),
-                             "base": base.to_dict(), "max_evals": search.config.optimize_evals,
-                             "fidelity": {**proto["fidelity"], "draws": max(100, proto["fidelity"]["draws"] // 2)},
-                             "reference": proto["reference"], "reference_sensor": proto["reference_sensor"]})
+                jobs.append(OptimizeJob(req, gap, search.space, search.cost, base, search.config.optimize_evals,
+                                        {**proto.fidelity, "draws": max(100, proto.fidelity["draws"] // 2)},
+                                        proto.reference, proto.reference_sensor))
     return jobs
 
 
@@ -54,7 +51,7 @@ def _design(u, base: Design, space: DesignSpace) -> Design:
                         n_bins=int(round(nlo + u[2] * (max(nhi, nlo) - nlo))))
 
 
-def optimize_choice(job: dict) -> dict:
+def optimize_choice(job: OptimizeJob) -> dict:
     """Cheapest design of one discrete choice meeting the corrected bound (see the module notes).
 
     Returns
@@ -67,25 +64,18 @@ def optimize_choice(job: dict) -> dict:
     """
     import nlopt
 
-    from nlosplan.sensor_models import SensorConfig
-
     t0 = time.perf_counter()
-    req = Requirement.from_dict(job["requirement"])
-    space = DesignSpace.from_dict(job["space"], sensor=SensorConfig.from_dict(job["space_reference"]))
-    cost_model = CostModel.from_dict(job["cost"])
-    base = Design.from_dict(job["base"])
+    req, space, cost_model, base = job.requirement, job.space, job.cost, job.base
     memo: dict[Design, tuple[float, float]] = {}
 
     def margin(u) -> tuple[float, float]:
         d = _design(u, base, space)
         if d not in memo:
-            r = evaluate({"evaluator": "bound", "task": req.task, "design": d.to_dict(), "seed": 0,
-                          "fidelity": job["fidelity"], "condition": None if req.condition is None else "=".join(req.condition),
-                          "reference": job["reference"], "reference_sensor": job["reference_sensor"]})
+            r = evaluate(job.bound_job(d))
             if r["status"] != "ok" or not math.isfinite(r["value"]):
                 memo[d] = (-1.0, math.nan)
             else:
-                pred = score_to_metric(req, metric_to_score(req, r["value"]) + job["gap"])
+                pred = score_to_metric(req, metric_to_score(req, r["value"]) + job.gap)
                 memo[d] = (req.margin(pred), r["value"])
         return memo[d]
 
@@ -110,7 +100,7 @@ def optimize_choice(job: dict) -> dict:
     opt.set_upper_bounds([1.0] * 3)
     opt.set_min_objective(objective)
     opt.add_inequality_constraint(lambda u, grad: -margin(u)[0], 0.0)
-    opt.set_maxeval(int(job["max_evals"]))
+    opt.set_maxeval(int(job.max_evals))
     opt.set_initial_step(0.25)
     try:
         opt.optimize(top.copy())
@@ -118,7 +108,7 @@ def optimize_choice(job: dict) -> dict:
         out["reason"] = f"COBYLA stopped early ({type(exc).__name__})"
     d = _design(best["u"], base, space)
     m, b = margin(best["u"])
-    pred = score_to_metric(req, metric_to_score(req, b) + job["gap"])
+    pred = score_to_metric(req, metric_to_score(req, b) + job.gap)
     out.update(design=d.to_dict(), cost=best["cost"], predicted=pred, bound=b, status="feasible",
                evaluations=len(memo), seconds=time.perf_counter() - t0)
     return out

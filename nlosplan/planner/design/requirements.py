@@ -1,28 +1,61 @@
 """What a task must achieve: one threshold on one metric, optionally under one condition.
 
-Defaults (DENALI-scale goals for a lab): localization RMSE <= 0.05 m, shape
-top-1 accuracy >= 0.35, size accuracy >= 0.90, over all test captures. A
-condition restricts the rows a metric is computed on, e.g. ``size=4in``,
-``lights=off`` or ``quadrant=far`` (the far quadrant of the gantry, see
-:func:`nlosplan.tasks.metrics.position_quadrants`).
+Defaults (DENALI-scale goals for a lab): localization RMS distance <= 0.05 m
+(``loc_rms_distance``: the RMS of the 2-D Euclidean error, sqrt(2) times
+DENALI's pooled ``rmse``), shape top-1 accuracy >= 0.35, size accuracy >=
+0.90, over all test captures. A
+:class:`Condition` restricts the rows a metric is computed on, e.g.
+``size=4in``, ``lights=off`` or ``quadrant=far`` (the far quadrant of the
+gantry, see :func:`nlosplan.tasks.metrics.position_quadrants`); it is parsed
+once, where a requirement is made, and travels as data (its text
+``col=value`` only in files and logs).
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
 
 from nlosplan.errors import UserError
 
-__all__ = ["Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "parse_requirement"]
+__all__ = ["Condition", "Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "parse_requirement"]
 
 #: The metric each task is judged by, whether smaller is better, and its unit.
 METRIC_OF_TASK: dict[str, tuple[str, bool, str]] = {
-    "loc": ("rmse", True, "m"),
+    "loc": ("loc_rms_distance", True, "m"),
     "shape": ("top1_acc", False, ""),
     "size": ("top1_acc", False, ""),
 }
 _CONDITIONS = {"size": ("4in", "8in"), "lights": ("on", "off"), "quadrant": ("near", "far")}
+
+
+class Condition(NamedTuple):
+    """``column == value``: the rows a requirement's metric is computed on (size, lights or quadrant)."""
+
+    column: str
+    value: str
+
+    @classmethod
+    def parse(cls, text: str | None) -> "Condition | None":
+        """``"col=value"`` as a condition (None for None or a text without ``=``)."""
+        if not text or "=" not in text:
+            return None
+        col, val = text.split("=", 1)
+        return cls(col, val)
+
+    def __str__(self) -> str:
+        return f"{self.column}={self.value}"
+
+    def mask(self, labels) -> np.ndarray:
+        """Which rows of a label table (pandas, with ``x``, ``y`` for ``quadrant``) meet it, shape (N,) bool."""
+        if self.column == "quadrant":
+            from nlosplan.tasks.metrics import position_quadrants  # scikit-learn: only when evaluated
+
+            return position_quadrants(labels)["quadrant"].to_numpy() == self.value
+        return labels[self.column].astype(str).to_numpy() == self.value
 
 
 @dataclass(frozen=True)
@@ -33,14 +66,14 @@ class Requirement:
     ----------
     task : {"loc", "shape", "size"}
     threshold : float
-        Metres for localization RMSE, a fraction for accuracies.
-    condition : (str, str), optional
-        ``(column, value)`` among size / lights / quadrant.
+        Metres for the localization RMS distance, a fraction for accuracies.
+    condition : Condition or (str, str), optional
+        ``(column, value)`` among size / lights / quadrant (kept as a :class:`Condition`).
     """
 
     task: str
     threshold: float
-    condition: tuple[str, str] | None = None
+    condition: Condition | None = None
 
     def __post_init__(self) -> None:
         if self.task not in METRIC_OF_TASK:
@@ -55,7 +88,7 @@ class Requirement:
             if col not in _CONDITIONS or val not in _CONDITIONS[col]:
                 allowed = "; ".join(f"{k}={'|'.join(v)}" for k, v in _CONDITIONS.items())
                 raise UserError(f"unknown condition {col}={val}; allowed: {allowed}")
-            object.__setattr__(self, "condition", (str(col), str(val)))
+            object.__setattr__(self, "condition", Condition(str(col), str(val)))
 
     @property
     def metric(self) -> str:
@@ -67,10 +100,10 @@ class Requirement:
 
     @property
     def name(self) -> str:
-        """E.g. ``loc rmse <= 0.05 m`` or ``shape top1_acc >= 0.35 [size=4in]``."""
+        """E.g. ``loc loc_rms_distance <= 0.05 m`` or ``shape top1_acc >= 0.35 [size=4in]``."""
         op = "<=" if self.smaller_is_better else ">="
         unit = METRIC_OF_TASK[self.task][2]
-        cond = f" [{self.condition[0]}={self.condition[1]}]" if self.condition else ""
+        cond = f" [{self.condition}]" if self.condition else ""
         return f"{self.task} {self.metric} {op} {self.threshold:g}{' ' + unit if unit else ''}{cond}"
 
     def met(self, value: float) -> bool:
@@ -84,13 +117,13 @@ class Requirement:
 
     def to_dict(self) -> dict:
         return {"task": self.task, "threshold": self.threshold,
-                "condition": None if self.condition is None else "=".join(self.condition)}
+                "condition": None if self.condition is None else str(self.condition)}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Requirement":
         cond = data.get("condition")
         if isinstance(cond, str):
-            cond = tuple(cond.split("=", 1)) if "=" in cond else None
+            cond = Condition.parse(cond)
         return cls(data["task"], data["threshold"], cond)
 
 
@@ -110,4 +143,4 @@ def parse_requirement(text: str) -> Requirement:
         threshold = float(value)
     except ValueError:
         raise UserError(f"requirement {text!r}: {value!r} is not a number") from None
-    return Requirement(task, threshold, (col, val) if col else None)
+    return Requirement(task, threshold, Condition(col, val) if col else None)

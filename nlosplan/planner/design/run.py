@@ -1,13 +1,14 @@
 """``run_design``: references, the ask/tell search on an executor, a JSON checkpoint, the summary.
 
-The checkpoint is ``OUT/design_checkpoint.json`` (the configuration and the
-optimize stage's candidates, rewritten atomically) and
-``OUT/design_evaluations.jsonl`` (every evaluation told so far, with its
+This is the executor side of the search's ``suggest``/``ingest``
+(:mod:`nlosplan.planner.protocol`): it runs what the search suggests and
+ingests the results. The checkpoint is ``OUT/design_checkpoint.json`` (the
+configuration and the optimize stage's candidates, rewritten atomically) and
+``OUT/design_evaluations.jsonl`` (every evaluation ingested so far, with its
 design, evaluator, fidelity, metric, interval, run time and status; one line
-appended and flushed per result). ``resume=True`` tells the search
-everything in it, so nothing already evaluated is computed again. The
-simulated references are saved beside it and reused when their
-configuration matches.
+appended and flushed per result). ``resume=True`` ingests everything in it,
+so nothing already evaluated is computed again. The simulated references are
+saved beside it and reused when their configuration matches.
 """
 
 from __future__ import annotations
@@ -249,8 +250,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume)
     sims, real, ref_info = _references(cfg, out, say)
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
-    for r in ckpt.results:
-        search.tell(r)
+    search.ingest(ckpt.results)
     if ckpt.data.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
                  for k, v in ckpt.data["candidates"].items()}
@@ -260,7 +260,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
         done = len(ckpt.results)
         stability = None
         while True:
-            jobs = search.ask()
+            jobs = search.suggest()
             if not jobs and search.stage == "optimize":
                 if ckpt.data.get("candidates") is None:
                     say("optimizing per discrete choice (nlopt COBYLA on the corrected bound)")
@@ -275,7 +275,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
                 break
             total = done + len(jobs)
             for _, result in executor.map(evaluate, jobs):
-                search.tell(result)
+                search.ingest([result])
                 ckpt.add(result)
                 done += 1
                 say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",

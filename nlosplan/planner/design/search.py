@@ -1,9 +1,10 @@
-"""The multi-fidelity design search, as ask/tell.
+"""The multi-fidelity design search, as ask/tell (:class:`~nlosplan.planner.protocol.AskTellPlanner`).
 
-:class:`DesignSearch` proposes batches of evaluations (:meth:`ask`) and takes
-their results (:meth:`tell`); it never runs anything itself, so the same
-search runs serially, on a process pool or on Dask, and resumes from a log of
-results (anything already told is not asked again). Stages:
+:class:`DesignSearch` proposes batches of evaluations (:meth:`~DesignSearch.suggest`)
+and takes their results (:meth:`~DesignSearch.ingest`); it never runs anything
+itself, so the same search runs serially, on a process pool or on Dask, and
+resumes from a log of results (anything already ingested is not suggested
+again). Stages:
 
 1. **screen** — the fast bounds (CRLB, ideal observer) on one-at-a-time grids
    along every axis from the reference design, and along jitter and photon
@@ -30,7 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlosplan.planner.design.cost import CostModel
-from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY, job_key
+from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
+from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
 
@@ -131,17 +133,14 @@ class DesignSearch:
     def _layout(self, d: Design) -> str:
         return f"{d.zones[0]}x{d.zones[1]}"
 
-    def job(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> dict:
+    def job(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> DesignJob:
         refs = self.trained_references if evaluator == "trained" else self.references
-        job = {"evaluator": evaluator, "task": req.task, "design": d.to_dict(), "seed": int(seed),
-               "fidelity": self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator],
-               "condition": None if req.condition is None else "=".join(req.condition),
-               "reference": str(refs[self._layout(d)]), "reference_sensor": self.space.sensor.to_dict()}
-        job["key"] = job_key(job)
-        return job
+        return DesignJob(evaluator, req.task, d, int(seed),
+                         self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator], req.condition,
+                         str(refs[self._layout(d)]), self.space.sensor.to_dict())
 
     def result(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> dict | None:
-        return self.results.get(self.job(evaluator, req, d, seed)["key"])
+        return self.results.get(self.job(evaluator, req, d, seed).key)
 
     def lines(self) -> list[tuple[str, str, Design, list[Design]]]:
         """The one-at-a-time lines: (axis, layout label, base, designs)."""
@@ -162,32 +161,34 @@ class DesignSearch:
         return list(dict.fromkeys(d for *_, ds in self.lines() for d in ds))
 
     # ----------------------------------------------------------- ask / tell
-    def tell(self, result: dict) -> None:
-        """Record one evaluation result (ok, unreachable or failed)."""
-        self.results[result["key"]] = result
+    def ingest(self, results) -> None:
+        """Record evaluation results (ok, unreachable or failed), in order."""
+        for result in results:
+            self.results[result["key"]] = result
 
-    def _new(self, jobs: list[dict]) -> list[dict]:
+    def _new(self, jobs: list[DesignJob]) -> list[DesignJob]:
         seen, out = set(), []
         for j in jobs:
-            if j["key"] not in self.results and j["key"] not in seen:
-                seen.add(j["key"])
+            key = j.key
+            if key not in self.results and key not in seen:
+                seen.add(key)
                 out.append(j)
         return out
 
-    def ask(self) -> list[dict]:
-        """The next batch of evaluations (empty: the search is finished).
+    def suggest(self, n: int | None = None) -> list[DesignJob]:
+        """The next batch of evaluations, at most ``n`` (all of the stage's by default; empty: finished).
 
-        Stages advance when everything they asked for has been told; jobs
-        already told (a resumed run) are never asked again.
+        Stages advance when everything they suggested has been ingested; jobs
+        already ingested (a resumed run) are never suggested again.
         """
         while True:
             jobs = self._new(self._stage_jobs())
             if jobs:
-                return jobs
+                return jobs if n is None else jobs[:n]
             if not self._advance():
                 return []
 
-    def _stage_jobs(self) -> list[dict]:
+    def _stage_jobs(self) -> list[DesignJob]:
         if self.stage == "screen":
             return [self.job("bound", r, d) for r in self.requirements for d in self._line_designs()]
         if self.stage == "curves":
@@ -265,9 +266,9 @@ class DesignSearch:
                 "seconds": float(sum(r["seconds"] for r in recs))}
 
     def _seed_keys(self, req, d):
-        return [self.job("trained", req, d, s)["key"] for s in range(max(self.config.seeds, 1))]
+        return [self.job("trained", req, d, s).key for s in range(max(self.config.seeds, 1))]
 
-    def _refine_jobs(self) -> list[dict]:
+    def _refine_jobs(self) -> list[DesignJob]:
         jobs = []
         for req in self.requirements:
             for axis, layout, base, designs in self.lines():
@@ -305,7 +306,7 @@ class DesignSearch:
         """
         pts = {}
         for r in self.results.values():
-            if r["task"] != req.task or r.get("condition") != (None if req.condition is None else "=".join(req.condition)):
+            if r["task"] != req.task or r.get("condition") != (None if req.condition is None else str(req.condition)):
                 continue
             d = Design.from_dict(r["design"])
             if any(getattr(d, f) != getattr(base, f) for f in ("zones", "bin_factor", "n_bins", "jitter_fwhm_ps",

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, replace
 
-from nlosplan.errors import UserError
+from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models import SensorConfig, resolve_sensor
 
 __all__ = ["AXES", "Design", "DesignSpace", "parse_zones"]
@@ -230,11 +230,8 @@ class DesignSpace:
     @classmethod
     def from_dict(cls, data: dict, sensor: SensorConfig | None = None) -> "DesignSpace":
         """From :meth:`to_dict` (or a TOML ``[space]`` table); ``sensor`` replaces loading the reference."""
-        known = {"reference", "zones", "bin_factors", "n_bins", "jitter_fwhm_ps", "pulse_fwhm_ps",
-                 "photon_fraction", "axes"}
-        bad = sorted(set(data) - known)
-        if bad:
-            raise UserError(f"unknown design-space key(s) {', '.join(bad)}; allowed: {', '.join(sorted(known))}")
+        check_keys(data, sorted(("reference", "zones", "bin_factors", "n_bins", "jitter_fwhm_ps", "pulse_fwhm_ps",
+                                 "photon_fraction", "axes")), "design-space key(s)")
         kw = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**kw, _sensor=sensor)
 

@@ -33,21 +33,15 @@ from __future__ import annotations
 import math
 
 from nlosplan._jax import jax, jnp
-from nlosplan.constants import C_M_PER_PS, FWHM_PER_SIGMA, MAX_COUNT_24BIT
+from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
+from nlosplan.sensor_models.impulse import impulse_sigma_ps
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
 #: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
 GRAZING_SIGMAS = 3.0
-
-
-def gaussian_sigma(pulse_fwhm_ps, jitter_fwhm_ps):
-    """Impulse-response sigma (ps) from pulse and jitter FWHM, with a finite gradient at 0."""
-    s2 = pulse_fwhm_ps * pulse_fwhm_ps + jitter_fwhm_ps * jitter_fwhm_ps
-    ok = s2 > 0
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, s2, 1.0)), 0.0) / FWHM_PER_SIGMA
 
 
 def _pose(p):
@@ -257,7 +251,7 @@ def sensor_terms(static, arrays, sensor_p) -> dict:
     if static.irf == "none":
         to_bins = lambda nodes: bin_nodes_without_irf(grid, nodes)  # noqa: E731
     else:
-        sigma = gaussian_sigma(sp["pulse_fwhm_ps"], sp["jitter_fwhm_ps"]) if static.irf == "full" else jnp.zeros((), dtype)
+        sigma = impulse_sigma_ps(sp["pulse_fwhm_ps"], sp["jitter_fwhm_ps"]) if static.irf == "full" else jnp.zeros((), dtype)
         pulse = None
         if static.pulse is not None:
             pulse = (jnp.asarray(static.pulse[0], dtype), static.pulse[1], jnp.asarray(static.pulse[2], dtype))

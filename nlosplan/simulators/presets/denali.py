@@ -25,22 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from nlosplan.denali.geometry import grid_index, label_xy, object_pose_mm
-from nlosplan.denali.rig import (
-    TABLE_SIZE,
-    WALL_SIZE,
-    WALL_TAG_DROP,
-    WALL_TAG_MARGIN,
-    camera_pose,
-    check_object,
-    check_position,
-    check_size,
-    class_group,
-    data_dir,
-    object_poses,
-    tag1_positions,
-    tag_pose,
-)
+from nlosplan import denali
 from nlosplan.errors import UserError
 from nlosplan.simulators.meshes import load_obj
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene
@@ -49,7 +34,7 @@ __all__ = ["denali_scene", "mount_mesh", "object_mesh", "rig", "scene_at"]
 
 
 def _load_packaged(relpath: str, name: str) -> Mesh:
-    with resources.as_file(data_dir().joinpath(*relpath.split("/"))) as path:
+    with resources.as_file(denali.data_dir().joinpath(*relpath.split("/"))) as path:
         return load_obj(path, name=name)
 
 
@@ -74,7 +59,7 @@ def object_mesh(obj: str, size: str) -> Mesh:
         The 3D-printed object, 6.6-7.6 mm thick along mesh z; its -z face
         looks at the relay wall once placed by :func:`nlosplan.denali.object_pose`.
     """
-    return _object_mesh(check_object(obj), check_size(size))
+    return _object_mesh(denali.check_object(obj), denali.check_size(size))
 
 
 @lru_cache(maxsize=None)
@@ -84,11 +69,12 @@ def mount_mesh() -> Mesh:
 
 
 def _wall(albedo: float) -> Rect:
-    t5 = tag_pose("5")
+    t5 = denali.tag_pose("5")
     x = t5[:3, 0] / np.linalg.norm(t5[:3, 0])
     y = t5[:3, 1] / np.linalg.norm(t5[:3, 1])
-    width, height = WALL_SIZE
-    center = t5[:3, 3] + (width / 2 - WALL_TAG_MARGIN) * x + (height / 2 - WALL_TAG_MARGIN - WALL_TAG_DROP) * y
+    width, height = denali.WALL_SIZE
+    margin = denali.WALL_TAG_MARGIN
+    center = t5[:3, 3] + (width / 2 - margin) * x + (height / 2 - margin - denali.WALL_TAG_DROP) * y
     lit = -np.cross(x, y)
     # u = x, v = -y gives u x v = -(x x y), the lit normal, with v pointing up in the world
     wall = Rect(center=center, u_axis=x, v_axis=-y, half_u=width / 2, half_v=height / 2,
@@ -99,10 +85,10 @@ def _wall(albedo: float) -> Rect:
 
 
 def _table(tag_id: str, albedo: float) -> Rect:
-    t = tag_pose(tag_id)
+    t = denali.tag_pose(tag_id)
     x, y = t[:3, 0], t[:3, 1]
     z = -np.cross(x, y)
-    sx, sy = TABLE_SIZE
+    sx, sy = denali.TABLE_SIZE
     pos = t[:3, 3] - 0.001 * z
     if tag_id == "14":
         pos = pos + sx / 2 * x - sy / 2 * y - 0.04 * x + 0.548 * y
@@ -117,7 +103,7 @@ def _table(tag_id: str, albedo: float) -> Rect:
 
 @lru_cache(maxsize=None)
 def _rig(wall_albedo: float, table_albedo: float, tables: bool) -> tuple[LidarPose, Rect, tuple[Rect, ...]]:
-    position, rotation = camera_pose()
+    position, rotation = denali.camera_pose()
     lidar = LidarPose.from_opencv(position, rotation)
     planes = (_table("14", table_albedo), _table("15", table_albedo)) if tables else ()
     return lidar, _wall(wall_albedo), planes
@@ -199,20 +185,20 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     >>> scene.meta["class_group"]
     'letters'
     """
-    name = check_object(obj)
-    size = check_size(size)
-    p = check_position(position)
+    name = denali.check_object(obj)
+    size = denali.check_size(size)
+    p = denali.check_position(position)
     on = _check_lights(lights)
     lidar, wall, planes = rig(wall_albedo=wall_albedo, table_albedo=table_albedo, tables=tables)
-    pose = object_poses()[p]
+    pose = denali.object_poses()[p]
     objects = [HiddenObject(mesh=object_mesh(name, size), to_world=pose, reflectance=reflectance,
                             albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}")]
     if mount:
         objects.append(HiddenObject(mesh=mount_mesh(), to_world=pose, reflectance="lambertian",
                                     albedo=0.8, name="object mount"))
-    xy = tag1_positions()[p, :2]
+    xy = denali.tag1_positions()[p, :2]
     meta = {
-        "preset": "denali", "object": name, "size": size, "position": p, "class_group": class_group(name),
+        "preset": "denali", "object": name, "size": size, "position": p, "class_group": denali.class_group(name),
         "lights": "on" if on else "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": reflectance,
         "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg, "mount": bool(mount),
         "wall_albedo": wall.albedo, "tables": bool(tables),
@@ -238,8 +224,8 @@ def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off")
         ``object_xy`` (:func:`nlosplan.denali.geometry.label_xy`) and ``gantry_mm``.
     """
     base = denali_scene(obj, size, 0, lights)
-    pose = object_pose_mm(x_mm, y_mm)
-    meta = {**base.meta, "position": grid_index(x_mm, y_mm), "object_xy": list(label_xy(x_mm, y_mm)),
+    pose = denali.object_pose_mm(x_mm, y_mm)
+    meta = {**base.meta, "position": denali.grid_index(x_mm, y_mm), "object_xy": list(denali.label_xy(x_mm, y_mm)),
             "gantry_mm": [float(x_mm), float(y_mm)]}
     return base.replace(objects=tuple(o.moved_to(pose) for o in base.objects), meta=meta,
                         name=f"denali {base.objects[0].name} at ({float(x_mm):.1f}, {float(y_mm):.1f}) mm")

@@ -1,0 +1,118 @@
+"""The design search's units of work, typed and picklable: one evaluation, one optimize run.
+
+A job is what the search suggests and an executor (this process, a local
+process pool, Dask workers) hands to a module-level function
+(:func:`~nlosplan.planner.design.evaluators.evaluate`,
+:func:`~nlosplan.planner.design.optimize.optimize_choice`). Jobs are frozen
+dataclasses of plain values, a :class:`~nlosplan.planner.design.space.Design`
+and a :class:`~nlosplan.planner.design.requirements.Condition`, so they
+pickle to any worker; results stay plain dicts (they are logged as JSON
+lines and read back on resume).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.requirements import Condition, Requirement
+from nlosplan.planner.design.space import Design, DesignSpace
+
+__all__ = ["DesignJob", "OptimizeJob", "EVALUATORS"]
+
+#: ``bound`` (CRLB / ideal observer), ``trained`` (models on the trained reference: real captures when given),
+#: ``trained_sim`` (models on the simulated reference, beside real ones).
+EVALUATORS = ("bound", "trained", "trained_sim")
+
+
+@dataclass(frozen=True)
+class DesignJob:
+    """One evaluation of one design on one task.
+
+    Parameters
+    ----------
+    evaluator : {"bound", "trained", "trained_sim"}
+    task : {"loc", "shape", "size"}
+    design : Design
+    seed : int
+    fidelity : dict
+        The evaluator's knobs (see :data:`~nlosplan.planner.design.evaluators.DEFAULT_FIDELITY`).
+    condition : Condition or None
+        The rows the metric is computed on.
+    reference : str
+        Path of the saved :class:`~nlosplan.planner.design.data.ReferenceData` of the design's zone layout.
+    reference_sensor : dict
+        The space's reference sensor (:meth:`SensorConfig.to_dict`).
+    """
+
+    evaluator: str
+    task: str
+    design: Design
+    seed: int
+    fidelity: dict
+    condition: Condition | None
+    reference: str
+    reference_sensor: dict
+
+    @property
+    def key(self) -> str:
+        """A stable id of the evaluation (what resume looks up); the reference by file name, so a moved OUT resumes."""
+        fields = {"evaluator": self.evaluator, "task": self.task, "design": self.design.to_dict(), "seed": self.seed,
+                  "fidelity": self.fidelity, "condition": None if self.condition is None else str(self.condition),
+                  "reference": Path(self.reference).name}  # names carry the content hash
+        return hashlib.sha1(json.dumps(fields, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    def to_dict(self) -> dict:
+        """The job as a result record carries it: plain values, the condition as ``col=value``, and ``key``."""
+        return {"evaluator": self.evaluator, "task": self.task, "design": self.design.to_dict(), "seed": self.seed,
+                "fidelity": self.fidelity, "condition": None if self.condition is None else str(self.condition),
+                "reference": self.reference, "reference_sensor": self.reference_sensor, "key": self.key}
+
+
+@dataclass(frozen=True)
+class OptimizeJob:
+    """One optimize run: the cheapest design of one discrete choice (zones, bin width) for one requirement.
+
+    Parameters
+    ----------
+    requirement : Requirement
+    gap : float
+        The measured bound-to-trained gap of the requirement's task (score units).
+    space : DesignSpace
+        With its reference sensor.
+    cost : CostModel
+    base : Design
+        The choice's costliest design (its zones and bin width fixed).
+    max_evals : int
+        COBYLA evaluations.
+    fidelity : dict
+        The bound evaluator's knobs.
+    reference : str
+        As :class:`DesignJob`.
+    reference_sensor : dict
+    """
+
+    requirement: Requirement
+    gap: float
+    space: DesignSpace
+    cost: CostModel
+    base: Design
+    max_evals: int
+    fidelity: dict
+    reference: str
+    reference_sensor: dict
+
+    def to_dict(self) -> dict:
+        """The job as plain data (what a failed run's record carries)."""
+        return {"requirement": self.requirement.to_dict(), "gap": self.gap, "space": self.space.to_dict(),
+                "space_reference": self.space.sensor.to_dict(), "cost": self.cost.to_dict(),
+                "base": self.base.to_dict(), "max_evals": self.max_evals, "fidelity": self.fidelity,
+                "reference": self.reference, "reference_sensor": self.reference_sensor}
+
+    def bound_job(self, design: Design) -> DesignJob:
+        """The bound evaluation of ``design`` under this run's requirement (seed 0)."""
+        return DesignJob("bound", self.requirement.task, design, 0, self.fidelity, self.requirement.condition,
+                         self.reference, self.reference_sensor)
