@@ -14,10 +14,10 @@ This room stores and loads; it trains nothing (that is :mod:`nlosplan.tasks`).
 
 from nlosplan.data.build import build_dataset
 from nlosplan.data.dataset import LABEL_COLUMNS, SCENE_KEYS, Dataset, scene_keys
-from nlosplan.data.denali_io import export_denali, import_denali, load_positions
+from nlosplan.data.denali_io import OBJECT_ALIASES, export_denali, import_denali, load_positions
 from nlosplan.data.load import load_dataset
-from nlosplan.data.records import describe
+from nlosplan.data.records import capture_key, describe
 from nlosplan.data.store import CaptureStore
 
-__all__ = ["CaptureStore", "Dataset", "LABEL_COLUMNS", "SCENE_KEYS", "build_dataset", "describe", "export_denali",
-           "import_denali", "load_dataset", "load_positions", "scene_keys"]
+__all__ = ["CaptureStore", "Dataset", "LABEL_COLUMNS", "OBJECT_ALIASES", "SCENE_KEYS", "build_dataset", "capture_key",
+           "describe", "export_denali", "import_denali", "load_dataset", "load_positions", "scene_keys"]

@@ -13,9 +13,9 @@
 
 from nlosplan.simulators.api import BACKENDS, background_histogram, expected_histogram, explain, sample, simulate
 from nlosplan.simulators.backend import Backend
-from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity
+from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity, resolve_fidelity
 from nlosplan.simulators.meshes import load_obj, sample_surface, square_patch, surface_quadrature
-from nlosplan.simulators.presets import corner_scene, denali_scene, scene_at
+from nlosplan.simulators.presets import corner_scene, denali_scene, rig, scene_at
 from nlosplan.simulators.result import SimulationResult
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, NLOSWarning, Rect, Scene
 from nlosplan.simulators.wall import WallScene, simulate_wall, wall_arrivals
@@ -40,6 +40,8 @@ __all__ = [
     "expected_histogram",
     "explain",
     "load_obj",
+    "resolve_fidelity",
+    "rig",
     "sample",
     "sample_surface",
     "scene_at",
