@@ -11,7 +11,7 @@ from nlosplan.errors import UserError
 from nlosplan.simulators.meshes import SurfaceSamples, load_obj, sample_surface, square_patch
 from nlosplan.simulators.scene import Mesh
 
-OBJECTS = resources.files("nlosplan.simulators") / "data" / "denali" / "objects"
+OBJECTS = resources.files("nlosplan.denali") / "data" / "objects"
 
 
 def _signed_volume(mesh: Mesh) -> float:
