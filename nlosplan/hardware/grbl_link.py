@@ -109,6 +109,17 @@ class GrblLink:
             if kind is None and got.strip():
                 out.append(got.strip())
 
+    def exchange(self, data: bytes, quiet_s: float = 0.3, timeout: float = 3.0) -> list[str]:
+        """Write raw bytes and return every line that comes back until ``quiet_s`` of silence (diagnostics).
+
+        Lines are returned as they are, not interpreted (no exception for ``ALARM:`` or ``error:``).
+        """
+        self._write(data)
+        try:
+            return self._reader.read_until_quiet(quiet_s, timeout)
+        except DeviceTimeout:
+            return []
+
     def send(self, line: str, timeout: float | None = None) -> list[str]:
         """Send one line and wait for its ``ok`` (send-and-wait); returns the lines before it.
 
@@ -213,8 +224,7 @@ class GrblLink:
 
     def soft_reset(self, timeout: float = 5.0) -> str:
         """0x18: reset GRBL (during motion it reports ALARM:3 first); returns the new banner."""
-        self._reader.flush()
-        self._write(b"\x18")
+        self._write(b"\x18")   # no flush first: an ALARM:3 in the answer says the reset stopped a move
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:

@@ -27,7 +27,8 @@ GRBL 1.1h does:
   ``ALARM:8`` (as in grbl-sim, where every pin reads active).
 
 Not emulated: jogging (``$J=``), check mode, ``$RST``, sleep, startup lines'
-execution, hard limits (``$21``) from pins, arcs, probing. Motion runs on a
+execution, hard limits (``$21``) from pins, arcs, probing; G4 is answered at
+once (GRBL first waits for the motion to end). Motion runs on a
 clock ``time_scale`` times faster than real time.
 """
 
@@ -246,19 +247,19 @@ class EmulatedGrbl(GcodeMixin, PtyDevice):
     def tick(self, now: float) -> None:
         with self._mlock:
             self._advance(self._now())
-            if self._boot_due is not None and now >= self._boot_due:
-                self._boot_due = None
-                self._greet()
             due = [t for t in self._pending if t[0] <= now]
             if due:
                 self._pending = [t for t in self._pending if t[0] > now]
                 for _, text in due:
                     self._say(text)
+            if self._boot_due is not None and now >= self._boot_due:
+                self._boot_due = None
+                self._greet()
 
     def on_bytes(self, data: bytes) -> None:
         with self._mlock:
             if self._boot_due is not None:
-                return            # still booting: the bootloader drops what arrives
+                return            # still booting (or resetting itself): what arrives is lost
             self._advance(self._now())
             for b in data:
                 if b == 0x18:

@@ -10,6 +10,7 @@ largest that keep every axis within its ``$110..$112`` rate and
 from __future__ import annotations
 
 import math
+import time
 
 from nlosplan.hardware.emulators.motion import Segment
 from nlosplan.hardware.grbl_protocol import machine_space
@@ -277,7 +278,7 @@ class GcodeMixin:
             if any(_AXES[i] in stuck for i in axes):   # pulled off, still triggered
                 for i in axes:
                     pos[i] -= -pulloff if int(self.settings[23]) & (1 << i) else pulloff
-                t += pulloff / max(float(self.settings[24]) / 60.0, 1e-6)
+                t += pulloff / seek
                 outcome = 8
                 break
             missing = [i for i in axes if _AXES[i] not in self.switches]
@@ -309,12 +310,13 @@ class GcodeMixin:
             self.state = "Idle"
             self._wco_counter = 0
             self._ok()
-        else:   # the firmware resets itself after a failed cycle: the $H line's ok, then a banner
-            self.state = "Alarm"
+        else:   # the firmware resets itself after a failed cycle (after the switch debounce, $26 ms):
+            self.state = "Alarm"   # the $H line's ok, then a banner; what arrives meanwhile is lost
             self._say(f"ALARM:{outcome}")
-            self._say("ok")
+            due = time.monotonic() + float(self.settings[26]) / 1000.0 / self.time_scale
+            self._pending.append((due, "ok"))
             self._soft_state()
-            self._greet()
+            self._boot_due = due
             return
         for line in deferred:
             if line is None:
