@@ -173,3 +173,39 @@ def test_emulator_and_firmware_answer_alike(grbl_sim_exe, tmp_path):
         assert a == b, f"line {i}: real {a!r}, emulated {b!r}; real {answers['real']}, emulated {answers['emulated']}"
     assert len(answers["real"]) == len(answers["emulated"])
     assert "ALARM:2" in answers["real"] and "ALARM:8" in answers["real"] and answers["real"].count("error:10") == 1
+
+
+@pytest.mark.parametrize("setup", ["defaults", "soft-limits"])
+def test_rig_capture_on_the_gantry_stores_commanded_and_reported_in_one_frame(grbl_device, tmp_path, capsys, setup):
+    """``rig capture`` with the real gantry (firmware or mirror) and an emulated sensor; with soft limits on,
+    the gantry powers up locked (--unlock) and the user frame sits at G54 = (-320, -320) in the negative space."""
+    import json
+
+    from nlosplan.cli import main
+    from nlosplan.tasks.store import CaptureStore
+
+    soft = setup == "soft-limits"
+    _configure(grbl_device, {**SOFT, **FAST} if soft else FAST, power_cycle=soft)
+    store = tmp_path / "cap.db"
+    argv = ["rig", "capture", "--emulate", "lidar", "--gantry", grbl_device.port, "--positions", "90,91",
+            "--repeats", "1", "--settle", "0", "--feed", "20000", "--store", str(store), "--json"]
+    code = main(argv + (["--unlock"] if soft else []))
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    data = json.loads(out)
+    assert (data["captured"], data["moves"], data["finalize"]) == (2, 2, ["sensor stopped", "gantry parked at (0, 0) mm"])
+    wco = [-320.0, -320.0] if soft else [0.0, 0.0]
+    with CaptureStore(store, create=False) as st:
+        caps = list(st.iter_captures())
+    assert [c.meta["commanded_mm"] for c in caps] == [[320.0, 320.0], [pytest.approx(284.444, abs=1e-3), 320.0]]
+    for c in caps:
+        m = c.meta
+        step = m["gantry"]["step_mm"][0]
+        assert step == 0.004 and m["gantry"]["work_offset_mm"] == wco and m["gantry"]["soft_limits"] is soft
+        assert m["reported_mm"] == pytest.approx(m["commanded_mm"], abs=step)           # same (user) frame
+        assert m["gantry_raw"]["mpos_mm"][:2] == pytest.approx([r + o for r, o in zip(m["reported_mm"], wco)])
+        assert m["gantry"]["version"] == "1.1h" and m["emulated"] == ["lidar"] and m["gantry_state"] == "Idle"
+    g = _open(grbl_device, work_offset="keep")
+    g.prepare()
+    assert g.where().raw["mpos_mm"][:2] == wco      # parked at user (0, 0)
+    g.close()
