@@ -32,7 +32,10 @@ def test_ten_position_raster_with_three_repeats_lands_thirty_captures(tmp_path):
         for c in caps:
             m = c.meta
             assert m["run_id"] == "r1" and m["commanded_mm"] == pytest.approx(list(grid_mm(c.labels["position"])))
-            assert m["reported_mm"] == pytest.approx(m["commanded_mm"], abs=1e-3)
+            # reported in the same (user) frame as commanded, on GRBL's step grid (250 steps/mm: 0.004 mm)
+            step = m["gantry"]["step_mm"][0]
+            assert step == pytest.approx(0.004) and m["reported_mm"] == pytest.approx(m["commanded_mm"], abs=step)
+            assert m["gantry_raw"]["mpos_mm"][:2] == pytest.approx(m["reported_mm"], abs=1e-9)   # work offset 0
             # DENALI's sequence; a toggle may be pressed again after a reconnect to a firmware that kept its state
             assert "".join(dict.fromkeys(m["sensor"]["sequence"])) == "hdoEOzm" and m["sensor"]["zones"] == "3x3"
             assert m["gantry"]["banner"].startswith("Grbl 1.1h") and m["lights"] == "off"
