@@ -297,7 +297,7 @@ class Executor:
                 time.sleep(self._settle)
 
     def _take(self, cmd: Capture, step: int, labels: dict, key: str) -> CaptureResult:
-        from nlosplan.hardware.tmf8828 import SensorError
+        from nlosplan.hardware.tmf8828 import SensorError, SensorGarbage
 
         rig = self.rig
         self._bring_to_target()
@@ -307,6 +307,8 @@ class Executor:
             try:
                 frame = rig.sensor.read_frame(fresh=True)
                 break
+            except SensorGarbage:
+                raise   # what is on the port does not change by reconnecting
             except (SensorError, ConnectionLost, DeviceTimeout) as exc:
                 if attempt == self.retries:
                     raise SensorError(f"no frame at step {step} after {self.retries} retries: {exc}") from None
