@@ -39,3 +39,23 @@ class NoisePort(PtyDevice):
         chunk = self._rng.integers(128, 256, size=n, dtype=np.uint8)
         chunk[self._rng.random(n) < 0.02] = ord("\n")
         self.send(chunk.tobytes())
+
+
+class ChattyPort(PtyDevice):
+    """Answers every byte with a line of text and streams text lines after ``m``: printable, never histograms
+    (another Arduino sketch on the sensor's port)."""
+
+    def __init__(self) -> None:
+        super().__init__("chatty")
+        self._streaming = False
+        self._next = 0.0
+
+    def on_bytes(self, data: bytes) -> None:
+        for ch in data.decode("ascii", errors="replace"):
+            self.send(f"got {ch}\r\n")
+            self._streaming = self._streaming or ch == "m"
+
+    def tick(self, now: float) -> None:
+        if self._streaming and now >= self._next and self.queued() < 4096:
+            self._next = now + 0.01
+            self.send("temperature,21.5,humidity,40\r\n")

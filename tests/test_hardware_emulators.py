@@ -98,3 +98,20 @@ def test_lights():
     e.set(True)
     e.set(False)
     assert e.changes == 2 and e.state is False
+
+
+def test_a_sensor_port_with_text_but_no_histograms_is_named():
+    from rig_ports import ChattyPort
+
+    from nlosplan.hardware.tmf8828 import SensorGarbage
+
+    with ChattyPort() as port:
+        lidar = TMF8828(port.port, quiet_s=0.05)
+        lidar.garbage_s = 1.0
+        lidar.start("3x3", "short")          # every command is answered (with text)
+        t0 = time.monotonic()
+        with pytest.raises(SensorGarbage, match=r"lines in 1.\d s, none of them histogram data \(e.g. "
+                                                r"'temperature,21.5"):
+            lidar.read_frame(timeout=10.0, fresh=True)
+        assert time.monotonic() - t0 < 2.0
+        lidar.close()

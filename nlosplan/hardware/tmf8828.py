@@ -201,24 +201,24 @@ class TMF8828:
         to_skip = skip if fresh else 0
         t0 = time.monotonic()
         deadline = t0 + timeout
-        st = self.assembler.stats
-        data0, lines0, sample = st.lines - st.garbage_lines - st.skipped_lines, st.lines, ""
+        data_seen, lines, sample = False, 0, ""
         while True:
             now = time.monotonic()
             left = deadline - now
             if left <= 0:
                 raise SensorError(f"TMF8828 on {self.port_name}: no complete {self.zones.value} frame within "
                                   f"{timeout:g} s ({self.assembler.stats.dropped_frames} dropped so far)")
-            if (now - t0 > self.garbage_s and st.lines - lines0 >= 20
-                    and st.lines - st.garbage_lines - st.skipped_lines == data0):
-                raise SensorGarbage(f"TMF8828 on {self.port_name}: {st.lines - lines0} lines in {now - t0:.1f} s, "
+            if now - t0 > self.garbage_s and lines >= 20 and not data_seen:
+                raise SensorGarbage(f"TMF8828 on {self.port_name}: {lines} lines in {now - t0:.1f} s, "
                                     f"none of them histogram data (e.g. {sample[:30]!r}): another device on this "
                                     "port, a wrong baud rate, or a firmware that does not stream histograms")
             try:
                 line = self._reader.readline(min(left, 0.5))
             except DeviceTimeout:
                 continue
+            lines += 1
             sample = sample or line
+            data_seen = data_seen or line.lstrip()[:4] in ("#Raw", "#Cal", "#Obj")
             for frame in self.assembler.feed(line):
                 if to_skip:
                     to_skip -= 1
