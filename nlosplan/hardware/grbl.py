@@ -125,7 +125,7 @@ class Grbl(GrblLink):
             raise UserError(f"gantry on {self.port_name} is in state {st.raw}: resume (~) or reset it (its own "
                             "controls) before nlosplan drives it")
         self.build = parse_build_info(self.send("$I"))
-        version = self.build.version if self.build else (self.banner or "?").split()[1:2]
+        version = self.build.version if self.build else (self.banner or "Grbl ?").split()[1]
         if not str(version).startswith("1.1"):
             raise WrongFirmware(f"gantry on {self.port_name} runs GRBL {version}; nlosplan speaks GRBL 1.1")
         return found.how
