@@ -24,6 +24,9 @@ EXAMPLES = {
         "nlosplan rig capture --emulate --plan raster --positions 0-9 --repeats 3 --store out/emu.db --json",
         "nlosplan rig capture --emulate --plan positions.csv --zones 8x8 --store out/emu.db "
         "--emulate-faults garble=40,drop=300",
+        "nlosplan rig capture --emulate lidar --gantry /dev/ttyUSB0 --home --positions 0-9 --store out/gantry.db",
+        "nlosplan rig capture --lidar /dev/ttyACM0 --gantry /dev/ttyACM1 --gantry-kind telemetrix "
+        "--rig-file denali-telemetrix.toml --store runs.db",
     ),
     "dry-run": (
         "nlosplan rig dry-run --plan raster --repeats 3",
@@ -401,9 +404,10 @@ def add(sub) -> None:
     """The ``rig`` subcommand: ``capture``, ``dry-run``, ``status`` (and MORE_RIG_COMMANDS)."""
     from nlosplan.cli.common import command_group
 
-    rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL gantry), or its pty emulators",
-                         "Drive the capture rig: a TMF8828 on the ams Arduino firmware and a GRBL 1.1 gantry, "
-                         "or, with --emulate, pty emulators of both backed by the fast simulator.")
+    rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL or Telemetrix gantry), or emulators",
+                         "Drive the capture rig: a TMF8828 on the ams Arduino firmware and a gantry on GRBL 1.1 or "
+                         "Telemetrix4Arduino, or, with --emulate, pty emulators of either or both (the sensor's "
+                         "backed by the fast simulator). Set-up and every error: docs/rig-connect.md.")
     c = _sub(rsub, "capture", "run a capture plan, every capture stored once (rerun the same command to resume)",
              CAPTURE_DESCRIPTION)
     add_device_options(c, seed_help="emulated sensor: noise seed (default: 0)")
@@ -435,12 +439,16 @@ def add(sub) -> None:
 
 CAPTURE_DESCRIPTION = """\
 Run a capture plan on the rig and store every capture (one SQLite transaction
-each, with run id, step, commanded and reported gantry position, sensor and
-firmware configuration, timestamps, lights, repeat). The plan is checked dry
-first (limits, object never in the LiDAR's direct view); nothing moves if it
-fails. The sensor is stopped and the gantry parked at the end, also on errors
-and Ctrl-C. Rerunning the same command resumes the run: stored captures are
-skipped, nothing is taken twice. A lost sensor link is reconnected and the
+each, with run id, step, commanded and reported gantry position in the plan's
+frame plus the controller's raw position, sensor and firmware configuration,
+timestamps, lights, repeat). The plan is checked dry first (limits, object
+never in the LiDAR's direct view) and the gantry's own limits at open (GRBL's
+machine space and work offset); nothing moves if a check fails. The sensor is
+stopped and the gantry parked at the end, also on errors and Ctrl-C, and the
+last line says so. Rerunning the same command resumes the run: stored captures
+are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
---home). With --emulate, both devices are pty emulators (DENALI scene, fast
-simulator) driven by the same code; motion runs --time-scale times faster."""
+--home). --emulate runs both devices as pty emulators (DENALI scene, fast
+simulator) driven by the same code, --emulate lidar or --emulate gantry one of
+them; emulated motion runs --time-scale times faster. docs/rig-connect.md: set-up
+and every error line."""
