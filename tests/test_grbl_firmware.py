@@ -34,6 +34,14 @@ def _configure(dev, settings: dict, *, power_cycle: bool) -> None:
         dev.power_cycle()
 
 
+def _moving(g: Grbl) -> None:
+    """Wait until the move is under way (grbl-sim's pace depends on the machine's load)."""
+    deadline = time.monotonic() + 10
+    while not ((st := g.status()).state == "Run" and st.mpos[0] > 5.0):
+        assert st.state in ("Idle", "Run") and time.monotonic() < deadline, st.raw
+        time.sleep(0.01)
+
+
 def test_default_settings_errors_settings_rules_and_line_ends(grbl_device):
     g = _open(grbl_device)
     g.prepare()
@@ -100,7 +108,7 @@ def test_feed_hold_and_resume(grbl_device):
     for k, v in FAST.items():
         g.set_setting(k, v)
     g.move_to(150.0, 0.0, feed_mm_min=20000, wait=False)
-    time.sleep(0.3)
+    _moving(g)
     g.feed_hold()
     deadline = time.monotonic() + 5
     while (st := g.status()).substate != "0":   # GRBL may answer a '?' sent right after '!' before holding
@@ -119,7 +127,7 @@ def test_reset_in_motion_gives_alarm_3_and_a_lock(grbl_device):
     for k, v in FAST.items():
         g.set_setting(k, v)
     g.move_to(150.0, 0.0, feed_mm_min=20000, wait=False)
-    time.sleep(0.3)
+    _moving(g)
     assert g.soft_reset().startswith("Grbl 1.1h")
     st = g.status()
     assert g.alarm == 3 and st.state == "Alarm" and 0 < st.mpos[0] < 150
@@ -144,8 +152,28 @@ def test_failed_homing_says_why(grbl_device):
 
 CONVERSATION = [b"?", b"\r\n", b"$I\n", b"$20=1\n", b"$22=1\n", b"$20=1\n", b"$0=2\n", b"$130=320\n", b"$131=320\n",
                 b"$110=20000\n", b"$111=20000\n", b"$120=2000\n", b"$121=2000\n", b"G10 L2 P1 X-320 Y-320\n", b"?",
-                b"G0 X310 Y310\n", b"G0 X330\n", b"?", b"$X\n", b"\x18", b"?", b"$X\n", b"$#\n", b"G5\n", b"$H\n",
-                b"?", b"\x18", b"?", b"$G\n"]
+                b"G0 X310 Y310\n", "idle", b"G0 X330\n", b"?", b"$X\n", b"\x18", b"?", b"$X\n", b"$#\n", b"G5\n",
+                b"$H\n", b"?", b"\x18", b"?", b"$G\n"]
+UNTIL = {b"$H\n": "[MSG:'$H'|'$X' to unlock]", b"\x18": "[MSG:'$H'|'$X' to unlock]"}
+
+
+def _converse(link, step) -> list[str]:
+    """Send one step and read its answer: until a marker line (GRBL resetting itself takes a while in grbl-sim
+    under load), until quiet, or ("idle") poll status reports until Idle and keep none of them."""
+    if step == "idle":
+        deadline = time.monotonic() + 30
+        while not any(ln.startswith("<Idle") for ln in link.exchange(b"?", quiet_s=0.1, timeout=1.0)):
+            assert time.monotonic() < deadline, "no Idle within 30 s"
+        return []
+    marker = UNTIL.get(step)
+    if marker is None:
+        return link.exchange(step, quiet_s=0.25, timeout=1.5)
+    lines = link.exchange(step, quiet_s=0.3, timeout=2.0)
+    deadline = time.monotonic() + 15
+    while marker not in lines:
+        assert time.monotonic() < deadline, f"no {marker!r} after {step!r}: {lines}"
+        lines += link.exchange(b"", quiet_s=0.3, timeout=1.0)
+    return lines
 
 
 def _normalised(lines):
@@ -163,10 +191,8 @@ def test_emulator_and_firmware_answer_alike(grbl_sim_exe, tmp_path):
         with dev:
             link = _open(dev)
             lines = []
-            for data in CONVERSATION:
-                # after a failed $H GRBL resets itself (debounce $26, ~3x slower in grbl-sim): wait for its banner
-                lines += link.exchange(data, quiet_s=1.5 if data == b"$H\n" else 0.4 if data == b"\x18" else 0.25,
-                                       timeout=6.0 if data == b"$H\n" else 1.5)
+            for step in CONVERSATION:
+                lines += _converse(link, step)
             link.close()
             answers[name] = _normalised(lines)
     for i, (a, b) in enumerate(zip(answers["real"], answers["emulated"])):
