@@ -253,6 +253,7 @@ def rig_failures(run_id: str, store_path):
     Ctrl-C stays an interrupt (exit 130) with the same line. Each line says what finalize did (sensor stopped?
     gantry parked? where?). Yields a dict: put the :class:`Executor` under ``"executor"`` once the rig is open.
     """
+    import errno
     import sqlite3
 
     from nlosplan.hardware.rig import device_errors
@@ -279,8 +280,12 @@ def rig_failures(run_id: str, store_path):
             hint = "clear the cause and rerun the same command with --unlock or --home to resume"
         raise UserError(f"run {run_id}: {exc}; {where()}; {hint}") from None
     except (sqlite3.Error, OSError) as exc:
-        raise UserError(f"run {run_id}: capture store {store_path}: {exc} (disk full? the captures committed "
-                        f"before are kept); {where()}; free space and rerun the same command to resume") from None
+        full = "full" in str(exc) or getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
+        what = (f"capture store {store_path}: {exc}" if isinstance(exc, sqlite3.Error) or full
+                else f"{type(exc).__name__}: {exc}")
+        todo = "free space and rerun the same command to resume" if full else "rerun the same command to resume"
+        raise UserError(f"run {run_id}: {what}{' (disk full; the captures committed before are kept)' if full else ''}"
+                        f"; {where()}; {todo}") from None
     except KeyboardInterrupt:
         raise KeyboardInterrupt(f"run {run_id} {where()}; rerun the same command to resume") from None
 
