@@ -40,8 +40,9 @@ progress are written to --out."""
 def _run_id(args) -> str:
     if args.run:
         return args.run
-    blob = json.dumps({k: getattr(args, k) for k in ("planner", "budget", "batch", "grid", "seed", "object", "size",
-                                                     "zones", "range_mode", "repeats", "emulate")}, sort_keys=True)
+    keys = ("planner", "budget", "batch", "grid", "seed", "object", "size", "zones", "range_mode", "repeats")
+    blob = json.dumps({**{k: getattr(args, k) for k in keys},
+                       "emulate": True if args.emulate == "both" else (args.emulate or False)}, sort_keys=True)
     return f"plan-{args.planner}-{args.object}-{args.size}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
 
 
@@ -63,20 +64,17 @@ def _approver(args, out: Path):
 
 
 def _cmd(args) -> int:
-    from nlosplan.cli.rig.capture import _open
+    from nlosplan.cli.rig.capture import _open, resolve_devices, rig_failures
     from nlosplan.hardware.executor import Executor, RunContext
-    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
     from nlosplan.hardware.plans import ask_tell_plan
     from nlosplan.hardware.rig import sensor_preset
-    from nlosplan.hardware.tmf8828 import SensorError
-    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
     from nlosplan.planner.capture import (CapturePlanner, MotionModel, PlannerConfig, build_space, denali_scene_fn,
                                           grid_points, screen_candidates)
     from nlosplan.planner.capture.closed_loop import ClosedLoop
     from nlosplan.data.store import CaptureStore
 
-    if not args.emulate and not (args.lidar and args.gantry):
-        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
+    devices = resolve_devices(args, seed_is_noise=False)
+    args.seed = 0 if args.seed is None else args.seed
     if args.lights == "on":
         raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
     out = Path(args.out)
@@ -104,22 +102,18 @@ def _cmd(args) -> int:
     loop = ClosedLoop(planner, target_rmse_m=args.target_rmse, checkpoint=out / "planner.json",
                       approve=_approver(args, out) if args.approve else None, on_batch=report)
     run_id = _run_id(args)
-    ctx = RunContext(args.object, args.size, lights=False, source="emulated:rig" if args.emulate else "rig",
+    ctx = RunContext(args.object, args.size, lights=False,
+                     source="emulated:rig" if "lidar" in devices["emulate"] else "rig",
                      plan=f"planner {args.planner}, budget {args.budget}, batches of {args.batch}",
                      plan_spec={"kind": "planner", "planner": args.planner, "budget": args.budget,
                                 "batch": args.batch, "grid": args.grid, "seed": args.seed})
     plan = ask_tell_plan(loop.suggest, loop.ingest, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
                          max_positions=args.budget)
     # what the rig CLI's opener (nlosplan.cli.rig.capture._open) reads besides the options above
-    args.emulate_faults, args.no_park, args.sensor_config = None, False, sensor
-    with CaptureStore(args.store) as store, _open(args) as rig:
-        ex = Executor(rig, store, run_id=run_id, context=ctx)
-        try:
-            summary = ex.run(plan)
-        except (GrblAlarm, GrblError, SensorError, ConnectionLost, DeviceTimeout) as exc:
-            s = ex.summary
-            raise UserError(f"run {run_id} stopped at step {max(s.steps - 1, 0)}: {exc}; {s.captured} new captures "
-                            "stored; fix it and rerun the same command to resume") from None
+    args.no_park, args.sensor_config = False, sensor
+    with rig_failures(run_id, args.store) as hold, CaptureStore(args.store) as store, _open(args, devices) as rig:
+        ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx)
+        summary = ex.run(plan)
     best = planner.best()
     result = {"run_id": run_id, "store": str(args.store), "planner": best, "history": loop.history,
               "executor": summary.to_dict(), "checkpoint": str(out / "planner.json"),
@@ -142,7 +136,7 @@ def _cmd(args) -> int:
 
 def add_rig(rsub) -> None:
     """Register ``nlosplan rig run``."""
-    from nlosplan.cli.rig.capture import add_mode_options, add_motion_options
+    from nlosplan.cli.rig.capture import add_device_options, add_mode_options, add_motion_options
     from nlosplan.planner.capture import STRATEGIES
 
     p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",
@@ -157,9 +151,7 @@ def add_rig(rsub) -> None:
     p.add_argument("--grid", type=int_type(2, 41), default=19, metavar="N",
                    help="candidate lattice N x N over the limits (default: 19)")
     p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves")
-    p.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port")
-    p.add_argument("--gantry", metavar="PORT", help="GRBL serial port")
-    p.add_argument("--emulate", action="store_true", help="pty emulators of both devices (same driver code)")
+    add_device_options(p, seed_help="planner seed, and the emulated sensor's noise seed (default: 0)")
     p.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
     p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
     p.add_argument("--out", default="nlosplan-out/rig-run", metavar="DIR",
@@ -169,13 +161,6 @@ def add_rig(rsub) -> None:
     p.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: 8in)")
     add_mode_options(p)
     p.add_argument("--lights", default="off", choices=["off", "on"], help="room lights (off only, for now)")
-    p.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
-                   help="TMF8828 firmware baud rate (default: 2000000)")
-    p.add_argument("--home", action="store_true", help="home the gantry ($H) first")
-    p.add_argument("--unlock", action="store_true", help="clear a gantry alarm with $X")
-    p.add_argument("--seed", type=int, default=0, help="planner seed (and --emulate noise seed) (default: 0)")
-    p.add_argument("--time-scale", type=number_type(float), default=20.0,
-                   help="--emulate: emulated motion runs this much faster (default: 20)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_cmd)
