@@ -16,7 +16,8 @@ against a :class:`~nlosplan.hardware.rig.Rig` and a
   differs from the plan's is refused (a different plan under the same run id).
 - Every capture is committed in one transaction, with its metadata: run id,
   step, plan, sensor and firmware configuration, commanded and reported
-  position, timestamps, lights, repeat, frame counters.
+  position, timestamps, lights, repeat, frame counters, and the run's frame
+  retries and sensor reconnects so far (``run_faults``; what the live page shows).
 - A failed frame read (timeout, garbled link, unplug) reconnects the sensor
   and retries (``retries`` times); gantry errors and alarms end the run.
 - Errors are thrown into the plan (so :func:`~nlosplan.hardware.plans.finalize_wrapper`
@@ -325,7 +326,9 @@ class Executor:
             "sensor": {"port": rig.sensor.port_name, **rig.sensor.firmware_config()},
             "gantry": {**rig.gantry.describe(), "feed_mm_min": rig.feed_mm_min},
             "frame": {"results": [o.to_dict() for o in frame.results], "assembler": rig.sensor.stats},
-            "emulated": list(rig.emulated), **cmd.meta,
+            "emulated": list(rig.emulated), "run_faults": {"retries": self.summary.retries,
+                                                           "reconnects": self.summary.reconnects},
+            **cmd.meta,
         }
         if step == 0 and self.ctx.plan_spec is not None:
             meta["plan_spec"] = self.ctx.plan_spec
