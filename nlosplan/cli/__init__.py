@@ -33,6 +33,7 @@ ROOMS: tuple[str, ...] = (
     "evaluate",
     "calibrate",
     "rig",
+    "serve",
 )
 
 

@@ -84,10 +84,12 @@ def _cmd_design(args) -> int:
     from nlosplan.planner.design.run import run_design
     from nlosplan.reports.design_report import minimum_hardware_text, write_design_report
 
+    from nlosplan.cli.live import live_page
+
     cfg = build_config(args)
     if args.real and not Path(args.real).exists():
         raise UserError(f"capture store {args.real} does not exist")
-    with progress_bar(args, None, "design", "eval") as bar:
+    with live_page(args, "design", args.out), progress_bar(args, None, "design", "eval") as bar:
         stage = {"last": None}
 
         def progress(text, done, total):
@@ -152,6 +154,9 @@ def add(sub) -> None:
     real.add_argument("--capture-sensor", metavar="NAME|FILE", help="preset or sensor file of the real captures "
                                                                     "(default: the space's reference)")
     p.add_argument("--json", action="store_true", help="print the JSON summary (see above)")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(p, "the run (stage, progress, the answer so far, trade-off plots)")
     p.set_defaults(func=_cmd_design)
 
 

@@ -224,8 +224,11 @@ def _cmd_capture(args) -> int:
                      source="emulated:rig" if "lidar" in devices["emulate"] else "rig", plan=desc,
                      plan_total=total, plan_spec=spec)
     pause = (lambda: Path(args.pause_file).exists()) if args.pause_file else None
-    with rig_failures(run_id, args.store) as hold, CaptureStore(args.store) as store, \
-            _open(args, devices) as rig, progress_bar(args, total, f"rig {run_id}", "capture") as bar:
+    from nlosplan.cli.live import live_page
+
+    with live_page(args, "rig", args.store, run_id=run_id), rig_failures(run_id, args.store) as hold, \
+            CaptureStore(args.store) as store, _open(args, devices) as rig, \
+            progress_bar(args, total, f"rig {run_id}", "capture") as bar:
         ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
                                          on_capture=(lambda r: bar.update(1)) if bar is not None else None,
                                          pause_when=pause)
@@ -422,6 +425,9 @@ def add(sub):
                    help="pause at the next position while this file exists")
     c.add_argument("--emulate-faults", type=_faults, default=None, metavar="K=V,...",
                    help=f"--emulate: inject faults ({', '.join(FAULT_KEYS)}), e.g. garble=40,drop=300,disconnect=5")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(c, "the run (rig map, last histograms, captures, faults)")
     c.set_defaults(func=_cmd_capture)
     d = _sub(rsub, "dry-run", "list a plan's moves and check limits and direct view before anything moves")
     _plan_options(d)

@@ -33,8 +33,10 @@ captures are fed back and the deterministic planner repeats its choices).
 --target-rmse stops when the cross-validated localization RMSE of the
 ensemble over the captures reaches it. --approve shows each batch (table,
 and a PNG of the positions in --out) and waits for 'y' before anything
-moves; any other answer ends the run. The planner's JSON checkpoint and the
-progress are written to --out."""
+moves; any other answer ends the run. With --live the batch can also be
+approved, edited (drop or add positions on the map) or refused on the live
+page (the first answer wins; the page needs the token of the printed URL).
+The planner's JSON checkpoint and the progress are written to --out."""
 
 
 def _run_id(args) -> str:
@@ -46,25 +48,62 @@ def _run_id(args) -> str:
     return f"plan-{args.planner}-{args.object}-{args.size}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
 
 
-def _approver(args, out: Path):
+def _approver(args, out: Path, run_id: str):
+    from nlosplan.cli.live import ask_approval
+    from nlosplan.planner.capture.approval import close_request, post_request
     from nlosplan.reports.capture_plan_plot import batch_table, plot_batch
 
-    def approve(batch, planner) -> bool:
+    live = args.live is not None
+
+    def approve(batch, planner):
         k = sum(1 for f in out.glob("batch_*.png"))
         png = plot_batch(batch, planner.space.points_mm, planner.space.points_mm[planner.captured],
                          planner.position_mm, out / f"batch_{k:03d}.png",
                          title=f"{planner.config.strategy}: batch of {len(batch)}")
         print(f"proposed batch ({len(planner.observations)} captured so far); plot: {png}\n{batch_table(batch)}",
               file=sys.stderr, flush=True)
-        print(f"move the gantry to these {len(batch)} positions? [y/N] ", end="", file=sys.stderr, flush=True)
-        answer = sys.stdin.readline().strip().lower()
-        return answer in ("y", "yes")
+        ids = [p["id"] for p in batch]
+        budget = planner.config.budget
+        left = None if budget is None else int(budget) - len(planner.observations) - sum(
+            p["status"] == "pending" for p in planner.proposals.values())
+        while True:   # until an answer the planner can run (an edit from the page is checked first)
+            req = post_request(out, run_id=run_id, batch=k, ids=ids, budget_left=left)
+            print(f"move the gantry to these {len(batch)} positions? [y/N] " + ("(or answer on the live page) "
+                                                                              if live else ""),
+                  end="", file=sys.stderr, flush=True)
+            answer = ask_approval(req, out, live=live)
+            if answer.decision == "approve" and answer.edited:
+                try:
+                    planner.amend(ids, drop=answer.drop, add=answer.add, check_only=True)
+                except UserError as exc:
+                    close_request(out, req, answer, note=f"not run: {exc}")
+                    print(f"\nthe edited batch cannot run: {exc}; asking again", file=sys.stderr, flush=True)
+                    continue
+                close_request(out, req, answer)
+                return {"drop": list(answer.drop), "add": list(answer.add)}
+            close_request(out, req, answer)
+            return answer.decision == "approve"
 
     return approve
 
 
 def _cmd(args) -> int:
-    from nlosplan.cli.rig.capture import _open, resolve_devices, rig_failures
+    from nlosplan.cli.live import live_page
+    from nlosplan.cli.rig.capture import resolve_devices
+
+    devices = resolve_devices(args, seed_is_noise=False)
+    args.seed = 0 if args.seed is None else args.seed
+    if args.lights == "on":
+        raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
+    out = Path(args.out)
+    run_id = _run_id(args)
+    with live_page(args, "rig", args.store, planner_dir=out, run_id=run_id, actions=args.approve):
+        out.mkdir(parents=True, exist_ok=True)
+        return _loop(args, devices, out, run_id)
+
+
+def _loop(args, devices: dict, out: Path, run_id: str) -> int:
+    from nlosplan.cli.rig.capture import _open, rig_failures
     from nlosplan.hardware.executor import Executor, RunContext
     from nlosplan.hardware.plans import ask_tell_plan
     from nlosplan.hardware.rig import sensor_preset
@@ -73,12 +112,6 @@ def _cmd(args) -> int:
     from nlosplan.planner.capture.closed_loop import ClosedLoop
     from nlosplan.data.store import CaptureStore
 
-    devices = resolve_devices(args, seed_is_noise=False)
-    args.seed = 0 if args.seed is None else args.seed
-    if args.lights == "on":
-        raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     sensor = sensor_preset(args.zones, args.range_mode)
     scene_fn = denali_scene_fn(args.object, args.size, "off")
     (x0, x1), (y0, y1) = args.limits
@@ -100,8 +133,7 @@ def _cmd(args) -> int:
                   f"{[round(v, 4) for v in row['calibration_theta']]}", file=sys.stderr, flush=True)
 
     loop = ClosedLoop(planner, target_rmse_m=args.target_rmse, checkpoint=out / "planner.json",
-                      approve=_approver(args, out) if args.approve else None, on_batch=report)
-    run_id = _run_id(args)
+                      approve=_approver(args, out, run_id) if args.approve else None, on_batch=report)
     ctx = RunContext(args.object, args.size, lights=False,
                      source="emulated:rig" if "lidar" in devices["emulate"] else "rig",
                      plan=f"planner {args.planner}, budget {args.budget}, batches of {args.batch}",
@@ -150,7 +182,8 @@ def add_rig(rsub) -> None:
     p.add_argument("--batch", type=int_type(1, 100), default=5, metavar="N", help="positions per batch (default: 5)")
     p.add_argument("--grid", type=int_type(2, 41), default=19, metavar="N",
                    help="candidate lattice N x N over the limits (default: 19)")
-    p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves")
+    p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves "
+                                                          "(with --live: or for an answer on the page)")
     add_device_options(p, seed_help="planner seed, and the emulated sensor's noise seed (default: 0)")
     p.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
     p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
@@ -163,4 +196,8 @@ def add_rig(rsub) -> None:
     p.add_argument("--lights", default="off", choices=["off", "on"], help="room lights (off only, for now)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(p, "the run (rig map with the proposed route, histograms, RMSE, calibration; with --approve "
+                       "the batch is approved, edited or refused on the page)")
     p.set_defaults(func=_cmd)
