@@ -1,7 +1,6 @@
 """``nlosplan serve`` and ``--live``: bad input (one line, exit 2, before any work), the token rules, the
 approval prompt that takes the first answer from the terminal or a page, and the server answering HTTP."""
 
-import json
 import os
 import socket
 import subprocess
@@ -18,7 +17,6 @@ from nlosplan.cli import main
 from nlosplan.cli.live import ask_approval
 from nlosplan.cli.serve import resolve_page, with_token
 from nlosplan.data.store import CaptureStore
-from nlosplan.errors import UserError
 from nlosplan.planner.capture.approval import Answer, post_request, submit_answer
 from nlosplan.sensor_models import preset
 
@@ -155,3 +153,15 @@ def test_serve_answers_http_on_loopback_and_stops_on_sigterm(store):
     finally:
         proc.terminate()
         assert proc.wait(timeout=30) == 0
+
+
+@pytest.mark.slow  # two emulated rig captures (~1 min)
+def test_bench_live_times_a_run_with_and_without_a_page(tmp_path):
+    from nlosplan.reports.live.bench import bench_live
+
+    res = bench_live(tmp_path, rounds=1, positions="0-1", repeats=1, pages=1)
+    (row,) = res["rounds"]
+    assert row["pages"] == 1                  # a session was open on the live run's page
+    assert res["captures"] == 2 and row["plain_s"] > 0 and row["live_s"] > 0
+    assert res["median_ratio"] == pytest.approx(row["live_s"] / row["plain_s"])
+    assert sorted(p.name for p in tmp_path.glob("*.db")) == ["round0_live.db", "round0_plain.db"]

@@ -172,11 +172,10 @@ def serve(sock: socket.socket, page: Page, *, poll_ms: int = 1000, stop: Callabl
         from nlosplan.reports.live.rig_approval import ApprovalPanel
         from nlosplan.reports.live.rig_page import build_rig_document
 
-        panel = None
-        if page.planner_dir is not None:
-            def panel(d, w, m):
-                return ApprovalPanel(d, w, m, allowed=lambda: _session_allowed(doc, page, w))
-        build_rig_document(doc, watch, approval=panel, poll_ms=poll_ms)
+        def panel(d, w, m):
+            return ApprovalPanel(d, w, m, allowed=lambda: _session_allowed(doc, page, w))
+
+        build_rig_document(doc, watch, approval=panel if page.planner_dir is not None else None, poll_ms=poll_ms)
 
     asyncio.set_event_loop(asyncio.new_event_loop())
     loop = IOLoop.current()
