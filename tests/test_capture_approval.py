@@ -138,3 +138,22 @@ def test_answers_are_checked():
     with pytest.raises(UserError, match="nothing to drop"):
         Answer("refuse", drop=["c00000"])
     assert Answer("approve", add=[3]).edited and not Answer("approve").edited
+
+
+def test_a_rerun_finds_the_approvals_given_but_never_a_refusal(tmp_path):
+    from nlosplan.planner.capture.approval import given_approval
+
+    where = [(320.0, 0.0), (320.0, 80.0)]
+    req = post_request(tmp_path, run_id="r", batch=0, ids=["c00000", "c00001"], positions=where)
+    submit_answer(tmp_path, req["request_id"], Answer("approve", drop=["c00001"], add=[7], by="page"))
+    close_request(tmp_path, req, read_answer(tmp_path, req["request_id"]))
+    req = post_request(tmp_path, run_id="r", batch=1, ids=["c00003"], positions=[(0.0, 0.0)])
+    close_request(tmp_path, req, Answer("refuse"))
+    req = post_request(tmp_path, run_id="r", batch=2, ids=["c00004"], positions=[(0.0, 80.0)])
+    close_request(tmp_path, req, Answer("approve", add=[99], by="page"), note="not run: candidate 99 does not exist")
+    got = given_approval(tmp_path, "r", 0, ["c00000", "c00001"], where)
+    assert (got["drop"], got["add"], got["answered_by"]) == (["c00001"], [7], "page")
+    assert given_approval(tmp_path, "r", 1, ["c00003"], [(0.0, 0.0)]) is None           # refused: asked again
+    assert given_approval(tmp_path, "r", 2, ["c00004"], [(0.0, 80.0)]) is None          # an edit that did not run
+    assert given_approval(tmp_path, "other", 0, ["c00000", "c00001"], where) is None    # another run
+    assert given_approval(tmp_path, "r", 0, ["c00000", "c00001"], [(0.0, 0.0), (320.0, 80.0)]) is None  # elsewhere

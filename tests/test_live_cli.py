@@ -1,6 +1,7 @@
 """``nlosplan serve`` and ``--live``: bad input (one line, exit 2, before any work), the token rules, the
 approval prompt that takes the first answer from the terminal or a page, and the server answering HTTP."""
 
+import json
 import os
 import socket
 import subprocess
@@ -165,3 +166,47 @@ def test_bench_live_times_a_run_with_and_without_a_page(tmp_path):
     assert res["captures"] == 2 and row["plain_s"] > 0 and row["live_s"] > 0
     assert res["median_ratio"] == pytest.approx(row["live_s"] / row["plain_s"])
     assert sorted(p.name for p in tmp_path.glob("*.db")) == ["round0_live.db", "round0_plain.db"]
+
+
+@pytest.mark.slow  # two emulated closed-loop runs (~2 min)
+def test_an_edit_made_on_the_page_is_replayed_when_the_run_is_rerun(tmp_path, monkeypatch, capsys):
+    """A run edited from the page (here a thread writing the page's answers), killed by a refusal, rerun:
+    the edited batch runs again as approved (resumed from the store, nothing moves), the next is asked."""
+    import io
+
+    from nlosplan.planner.capture.approval import read_request
+
+    out, db = tmp_path / "out", tmp_path / "loop.db"
+    argv = ["rig", "run", "--emulate", "--planner", "active", "--budget", "4", "--batch", "2", "--grid", "3",
+            "--repeats", "1", "--settle", "0", "--approve", "--store", str(db), "--out", str(out), "--json"]
+    answered = []
+
+    def page():
+        deadline = time.monotonic() + 600
+        while len(answered) < 2 and time.monotonic() < deadline:
+            req = read_request(out)
+            if req and req["status"] == "pending" and req["request_id"] not in answered:
+                state = json.loads((out / "planner.json").read_text())
+                taken = {p["index"] for p in state["proposals"]}
+                free = next(i for i in range(len(state["space"]["points_mm"])) if i not in taken)
+                answer = (Answer("approve", drop=[req["ids"][0]], add=[free], by="page") if not answered
+                          else Answer("refuse", by="page"))
+                submit_answer(out, req["request_id"], answer)
+                answered.append(req["request_id"])
+            time.sleep(0.1)
+
+    thread = threading.Thread(target=page, daemon=True)
+    thread.start()
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))   # no terminal: the page answers
+    assert main(argv + ["--live", "0"]) == 0
+    thread.join(timeout=5)
+    first = json.loads(capsys.readouterr().out)
+    assert first["finished"] == "batch not approved" and first["executor"]["captured"] == 2
+    monkeypatch.setattr("sys.stdin", io.StringIO("n\n"))
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    again = json.loads(cap.out)
+    assert "batch 0 was approved by the page" in cap.err and "with edits" in cap.err
+    assert cap.err.count("move the gantry to these") == 1      # only batch 1 was asked
+    assert (again["executor"]["captured"], again["executor"]["resumed"]) == (0, 2)
+    assert again["planner"]["calibration"]["theta"] == pytest.approx(first["planner"]["calibration"]["theta"])

@@ -36,6 +36,9 @@ and a PNG of the positions in --out) and waits for 'y' before anything
 moves; any other answer ends the run. With --live the batch can also be
 approved, edited (drop or add positions on the map) or refused on the live
 page (the first answer wins; the page needs the token of the printed URL).
+Every answer is logged in --out (approvals.jsonl); a rerun runs the batches
+approved before as they were approved (edits included) and asks again from
+the first batch that was not.
 The planner's JSON checkpoint and the progress are written to --out."""
 
 
@@ -50,13 +53,15 @@ def _run_id(args) -> str:
 
 def _approver(args, out: Path, run_id: str):
     from nlosplan.cli.live import ask_approval
-    from nlosplan.planner.capture.approval import close_request, post_request
+    from nlosplan.planner.capture.approval import close_request, given_approval, post_request
     from nlosplan.reports.capture_plan_plot import batch_table, plot_batch
 
     live = args.live is not None
+    asked = [0]
 
     def approve(batch, planner):
-        k = sum(1 for f in out.glob("batch_*.png"))
+        k = asked[0]
+        asked[0] += 1
         png = plot_batch(batch, planner.space.points_mm, planner.space.points_mm[planner.captured],
                          planner.position_mm, out / f"batch_{k:03d}.png",
                          title=f"{planner.config.strategy}: batch of {len(batch)}")
@@ -66,8 +71,15 @@ def _approver(args, out: Path, run_id: str):
         budget = planner.config.budget
         left = None if budget is None else int(budget) - len(planner.observations) - sum(
             p["status"] == "pending" for p in planner.proposals.values())
+        where = [(p["x_mm"], p["y_mm"]) for p in batch]
+        before = given_approval(out, run_id, k, ids, where)
+        if before is not None:   # a rerun resumes: the batch was approved then (by whom, when: approvals.jsonl)
+            print(f"batch {k} was approved by the {before['answered_by']} at {before['answered_utc']}"
+                  + (" with edits" if before["drop"] or before["add"] else "") + ": running it again as approved",
+                  file=sys.stderr, flush=True)
+            return {"drop": before["drop"], "add": before["add"]} if before["drop"] or before["add"] else True
         while True:   # until an answer the planner can run (an edit from the page is checked first)
-            req = post_request(out, run_id=run_id, batch=k, ids=ids, budget_left=left)
+            req = post_request(out, run_id=run_id, batch=k, ids=ids, positions=where, budget_left=left)
             print(f"move the gantry to these {len(batch)} positions? [y/N] " + ("(or answer on the live page) "
                                                                               if live else ""),
                   end="", file=sys.stderr, flush=True)

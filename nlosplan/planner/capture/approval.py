@@ -22,7 +22,11 @@ answer wins:
     answered, by whom).
 
 An answer to another request id (a stale file of an earlier run in the same
-folder) is never taken.
+folder) is never taken. A rerun of the same run (which resumes from the store
+and, the planner being deterministic, proposes the same batches) finds the
+approvals it was given in ``approvals.jsonl`` (:func:`given_approval`), so
+the batches it runs again are the ones approved, edits included; a refusal is
+never replayed (rerunning is how a refused run goes on).
 """
 
 from __future__ import annotations
@@ -36,8 +40,8 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["REQUEST", "LOG", "Answer", "answer_path", "close_request", "post_request", "read_answer", "read_request",
-           "submit_answer"]
+__all__ = ["REQUEST", "LOG", "Answer", "answer_path", "close_request", "given_approval", "post_request", "read_answer",
+           "read_request", "submit_answer"]
 
 REQUEST = "approval.json"
 LOG = "approvals.jsonl"
@@ -97,13 +101,17 @@ def answer_path(out, request_id: str) -> Path:
     return Path(out) / f"approval_answer_{request_id}.json"
 
 
-def post_request(out, *, run_id: str, batch: int, ids, budget_left: int | None = None) -> dict:
-    """Ask for an answer to a proposed batch: write ``approval.json`` (status pending) and return it."""
+def post_request(out, *, run_id: str, batch: int, ids, positions=None, budget_left: int | None = None) -> dict:
+    """Ask for an answer to a proposed batch: write ``approval.json`` (status pending) and return it.
+
+    ``positions`` are the batch's (x_mm, y_mm) in route order (kept with the request and its log line).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     req = {"format": FORMAT, "request_id": uuid.uuid4().hex[:16], "run_id": run_id, "batch": int(batch),
-           "ids": [str(i) for i in ids], "budget_left": budget_left, "status": "pending", "pid": os.getpid(),
-           "created_utc": _utc()}
+           "ids": [str(i) for i in ids], "positions": None if positions is None else [[round(float(v), 4) for v in p]
+                                                                                     for p in positions],
+           "budget_left": budget_left, "status": "pending", "pid": os.getpid(), "created_utc": _utc()}
     _write(out / REQUEST, req)
     return req
 
@@ -164,3 +172,26 @@ def close_request(out, request: dict, answer: Answer, note: str = "") -> dict:
         fh.write(json.dumps(done) + "\n")
     answer_path(out, request["request_id"]).unlink(missing_ok=True)
     return done
+
+
+def given_approval(out, run_id: str, batch: int, ids, positions) -> dict | None:
+    """The approval (approve, edited or not) an earlier run of ``run_id`` got for this batch with these
+    proposal ids at these positions, from ``approvals.jsonl`` (the last one; an edit that could not run
+    does not count); None when there is none."""
+    where = [[round(float(v), 4) for v in p] for p in positions]
+    path = Path(out) / LOG
+    found = None
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return None
+    for line in lines:
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if (rec.get("run_id") == run_id and rec.get("batch") == int(batch) and rec.get("ids") == [str(i) for i in ids]
+                and rec.get("positions") == where and rec.get("decision") == "approve"
+                and not str(rec.get("note", "")).startswith("not run")):
+            found = rec
+    return found

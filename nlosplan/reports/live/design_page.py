@@ -112,7 +112,7 @@ def build_design_document(doc, watch: DesignWatch, *, poll_ms: int = 1000) -> No
         sources.clear()
         for req in watch.groups():
             src = ColumnDataSource(dict(x=[], value=[], lo=[], hi=[], evaluator=[], color=[], design=[], seed=[],
-                                        seconds=[], cost=[], status=[]), name=f"trade:{req['name']}")
+                                        seconds=[], cost=[], status=[]), name=f"tradedata:{req['name']}")
             f = figure(width=430, height=320, title=req["name"], x_axis_label=X_AXES[axis.value],
                        y_axis_label=req["metric"], tools="pan,wheel_zoom,box_zoom,reset,save",
                        name=f"trade:{req['name']}")

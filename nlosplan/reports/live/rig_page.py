@@ -33,6 +33,11 @@ def status_html(watch: RigWatch) -> str:
     if run is None:
         lines.append(f"no rig run in this store yet ({watch.total} captures of other sources)")
         return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
+    if not watch.runs.get(run):
+        lines.append(f"<b>run</b> <span data-k='run'>{run}</span>: no capture yet")
+        if watch.awaiting():
+            lines.append("state: <b data-k='state'>awaiting approval</b>")
+        return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
     m, c, f = watch.meta(), watch.counts(), watch.faults()
     lines.append(f"<b>run</b> <span data-k='run'>{run}</span> · {m.get('object')} {m.get('size')}, "
                  f"{m.get('zones')} zones, lights {m.get('lights')}, {m.get('source')} · plan: {m.get('plan', '?')}")
@@ -151,7 +156,7 @@ def build_rig_document(doc, watch: RigWatch, *, approval=None, poll_ms: int = 10
     pad = 0.06 * max(lim[0][1] - lim[0][0], lim[1][1] - lim[1][0])
     m = figure(width=520, height=520, title="rig map (gantry mm)", match_aspect=True, name="map",
                x_range=(lim[0][0] - pad, lim[0][1] + pad), y_range=(lim[1][0] - pad, lim[1][1] + pad),
-               x_axis_label="gantry x (mm)", y_axis_label="gantry y (mm)", tools="pan,wheel_zoom,reset,tap,save")
+               x_axis_label="gantry x (mm)", y_axis_label="gantry y (mm)", tools="pan,wheel_zoom,reset,save")
     box = ColumnDataSource({"left": [lim[0][0]], "right": [lim[0][1]], "bottom": [lim[1][0]], "top": [lim[1][1]]},
                            name="map:limits")
     m.quad(left="left", right="right", bottom="bottom", top="top", source=box, fill_alpha=0, line_dash="dashed",
