@@ -131,3 +131,10 @@ def test_a_store_that_does_not_exist_yet_is_waited_for(tmp_path):
     assert not watch.refresh(force=True) and not watch.opened
     assert "waiting for the run to create the store" in status_html(watch)
     json.dumps(watch.summary())
+
+
+def test_a_run_not_started_yet_in_a_store_of_other_runs(captured):
+    watch = RigWatch(captured, run_id="plan-next", min_interval_s=0)   # what --live asks before the first capture
+    assert watch.refresh(force=True) and len(watch.runs) == 2
+    assert watch.last_hist is None and watch.counts()["captures"] == 0
+    assert "<span data-k='run'>plan-next</span>: no capture yet" in status_html(watch)

@@ -195,7 +195,7 @@ class RigWatch:
             self.runs.setdefault(rec["run_id"], []).append(rec)
         if rows:
             run = self.run_id
-            if run is not None and (self.last_hist is None or self.last_hist["id"] != self.runs[run][-1]["id"]):
+            if run in self.runs and (self.last_hist is None or self.last_hist["id"] != self.runs[run][-1]["id"]):
                 self._read_hist(self.runs[run][-1]["id"])
         return bool(rows)
 
