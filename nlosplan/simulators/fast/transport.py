@@ -37,6 +37,7 @@ from nlosplan.constants import C_M_PER_PS, FWHM_PER_SIGMA, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
+from nlosplan.sensor_models.zone_terms import apply_zone_terms
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
 #: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
@@ -238,6 +239,14 @@ def object_nodes(static, arrays, scene_p, bw, t0):
     return total
 
 
+def zone_nodes(static, arrays, nodes, bw, t0, overlap: bool = True):
+    """The sensor's per-zone gain, overlap and time offset on node transients (Z, n_nodes) (none: unchanged)."""
+    if not static.zone_terms:
+        return nodes
+    grid = static.grid
+    return apply_zone_terms(nodes, grid.node_times(bw, t0), bw / grid.oversample, overlap=overlap, **arrays["zone"])
+
+
 def sensor_terms(static, arrays, sensor_p) -> dict:
     """What a sensor adds independently of the hidden objects (shared by every scene of a batch).
 
@@ -269,11 +278,11 @@ def sensor_terms(static, arrays, sensor_p) -> dict:
     if static.direct:
         nodes = deposit(grid, arrays["direct_path"] / C_M_PER_PS, arrays["direct_w"], arrays["direct_row"], z,
                         bin_width_ps=bw, start_offset_ps=t0)
-        direct = sp["photon_scale"] * to_bins(nodes)
+        direct = sp["photon_scale"] * to_bins(zone_nodes(static, arrays, nodes, bw, t0))
     if static.crosstalk:
         nodes = deposit(grid, jnp.zeros((z,), dtype), jnp.broadcast_to(sp["crosstalk"], (z,)), jnp.arange(z), z,
                         bin_width_ps=bw, start_offset_ps=t0)
-        xt = to_bins(nodes)
+        xt = to_bins(zone_nodes(static, arrays, nodes, bw, t0, overlap=False))
     return {"sp": sp, "to_bins": to_bins, "direct": direct, "crosstalk": xt}
 
 
@@ -284,13 +293,16 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
     bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
     obj = jnp.zeros_like(terms["direct"])
     if static.objects:
-        obj = sp["photon_scale"] * to_bins(object_nodes(static, arrays, scene_p, bw, t0))
+        obj = sp["photon_scale"] * to_bins(zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
+                                                      bw, t0))
     lam = terms["direct"] + obj + terms["crosstalk"]
     rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
         sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
     bg = jnp.asarray(rate, dtype) * bw * 1e-12
+    dead = None if static.dead_time_ps is None else static.dead_time_ps / bw
     counts = counts_from_rates(lam, iterations=sp["iterations"], background_per_bin=bg, pileup=static.pileup,
-                               max_count=MAX_COUNT_24BIT if static.saturation else None)
+                               max_count=MAX_COUNT_24BIT if static.saturation else None, spads=static.spads,
+                               dead_bins=dead)
     if not parts:
         return counts
     it = sp["iterations"]
