@@ -170,6 +170,7 @@ def add(sub) -> None:
 MORE_BENCHES: tuple[str, ...] = (
     "bench_rig",
     "bench_fidelity",
+    "bench_real",
 )
 
 

@@ -110,6 +110,9 @@ class SensorConfig:
         ``pulse_shape``. 0: no tail.
     pulse_tail_decay_ps : float
         E-folding time of that tail, ps (> 0).
+    time_walk_ps : float
+        Flux-dependent timing: a zone records its light earlier by this many ps
+        per decade of its signal (photons per iteration, 1 = no shift), ps; 0: none.
     spads_per_zone : int
         Independent detectors sharing a zone's light equally (with ``pileup``), >= 1.
     dead_time_ps : float, optional
@@ -150,6 +153,7 @@ class SensorConfig:
     zone_overlap_m: tuple[float, ...] | None = None
     pulse_tail_fraction: float = 0.0
     pulse_tail_decay_ps: float = 1000.0
+    time_walk_ps: float = 0.0
     spads_per_zone: int = 1
     dead_time_ps: float | None = None
     notes: str = field(default="", compare=False)
@@ -407,6 +411,8 @@ def validate(cfg: SensorConfig) -> None:
     _check(decay > 0, f"pulse_tail_decay_ps={decay} must be > 0 ps")
     _check(frac == 0 or cfg.pulse_shape is not None,
            "pulse_tail_fraction > 0 needs a pulse_shape (the tail continues the measured pulse after its last sample)")
+    walk = _finite_number("time_walk_ps", cfg.time_walk_ps)
+    _check(abs(walk) <= 1000, f"time_walk_ps={walk} is out of range; allowed: -1000 to 1000 ps per decade")
     _integer("spads_per_zone", cfg.spads_per_zone, 1, 10**6)
     if cfg.dead_time_ps is not None:
         dead = _finite_number("dead_time_ps", cfg.dead_time_ps)

@@ -37,7 +37,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.binning import bin_boxes, bin_impulses
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.counts import deadtime_expected, sample_poisson, saturate
-from nlosplan.sensor_models.zone_terms import apply_zone_terms_arrivals, zone_values
+from nlosplan.sensor_models.zone_terms import apply_zone_terms_arrivals, walk_shift_ps, zone_values
 
 #: The exponential pulse tail is carried this many windows past the pulse (further light cannot land in the window).
 TAIL_WINDOWS = 1.0
@@ -238,7 +238,7 @@ def expected_histogram(sensor: SensorConfig, times_ps, weights, *, lights_on: bo
     t, w = t.astype(dt), w.astype(dt)
     zv = zone_values(sensor)
     xt, xt_t = sensor.crosstalk, 0.0
-    if any(v is not None for v in zv.values()):
+    if any(v is not None for v in zv.values()) or sensor.time_walk_ps != 0:
         shape = jnp.broadcast_shapes(t.shape, w.shape)
         grid = (sensor.zones_rows, sensor.zones_cols)
         if shape[-3:-1] == grid:
@@ -254,6 +254,10 @@ def expected_histogram(sensor: SensorConfig, times_ps, weights, *, lights_on: bo
         if xt > 0:  # crosstalk: the zone's gain and offset, no overlap
             xt = xt * (1.0 if zv["gains"] is None else jnp.asarray(zv["gains"], dt)[:, None])
             xt_t = 0.0 if zv["offsets_ps"] is None else jnp.asarray(zv["offsets_ps"], dt)[:, None]
+        if sensor.time_walk_ps != 0:
+            flux = sensor.photon_scale * jnp.sum(w, axis=-1, keepdims=True) + xt
+            shift = walk_shift_ps(flux, sensor.time_walk_ps)
+            t, xt_t = t + shift, xt_t + shift
         counts = _expected(sensor, t, w, lights_on, xt, xt_t)
         return counts.reshape(shape[:-1] + (sensor.n_bins,))
     return _expected(sensor, t, w, lights_on, xt, 0.0)

@@ -18,7 +18,9 @@ time offset, ``s_z`` the rate of its clock (time scale, 1 nominal),
 ``d0_z`` its near-field overlap distance: the fraction of the
 zone's view lit by the flash falls at short range, half at ``r = d0``.
 Crosstalk (light that never leaves the sensor, ``t = 0``) takes the gain and
-the offset but not the overlap.
+the offset but not the overlap. With a time walk ``w`` (ps per decade) the
+zone's light is recorded ``w log10(Lambda_z)`` earlier, ``Lambda_z`` its signal
+photons per iteration (after gain and overlap, crosstalk included).
 """
 
 from __future__ import annotations
@@ -168,3 +170,8 @@ def apply_zone_terms_arrivals(times_ps, weights, *, gains=None, offsets_ps=None,
     if offsets_ps is not None:
         t = t + jnp.asarray(offsets_ps, t.dtype)[:, None]
     return t, w
+
+
+def walk_shift_ps(flux, walk_ps):
+    """Time shift (ps, negative = earlier) of a zone with ``flux`` signal photons per iteration."""
+    return -jnp.asarray(walk_ps) * jnp.log10(jnp.maximum(jnp.asarray(flux), 1e-30))

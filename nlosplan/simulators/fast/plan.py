@@ -63,6 +63,7 @@ class PlanStatic:
     zone_terms: tuple[str, ...] = ()
     spads: int = 1
     dead_time_ps: float | None = None
+    walk_ps: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -347,6 +348,9 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
             ("overlap_m", "near-field overlap", "r^2 / (r^2 + d0^2) per zone, r = c t / 2", "all 0")):
         on = zv[key] is not None
         terms.append(Term(on, name, what if on else f"{neutral} in this sensor"))
+    walk = sensor.time_walk_ps != 0
+    terms.append(Term(walk, "time walk", f"{sensor.time_walk_ps:g} ps earlier per decade of a zone's light, "
+                      "nodes moved per scene" if walk else "time_walk_ps is 0"))
     tail = sensor.pulse_tail_fraction > 0
     terms.append(Term(tail, "pulse tail", f"exponential, {sensor.pulse_tail_fraction:.2g} of the pulse, "
                       f"decay {sensor.pulse_tail_decay_ps:g} ps" if tail else "pulse_tail_fraction is 0"))
@@ -361,6 +365,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         object_rows=tuple(tuple(int(r) for r in o.zone_rows) for o in obj_plans),
         zone_terms=tuple(k for k, v in zv.items() if v is not None), spads=int(sensor.spads_per_zone),
         dead_time_ps=None if sensor.dead_time_ps is None else float(sensor.dead_time_ps),
+        walk_ps=float(sensor.time_walk_ps),
     )
     s = path.shape[1]
     arrays = {

@@ -36,7 +36,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import (background_per_bin, bin_arrivals, counts_from_rates, dead_bins, pulse_boxes,
                                              sample_counts)
-from nlosplan.sensor_models.zone_terms import apply_zone_terms, zone_values
+from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, zone_values
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit_at, irf_extent_ps, irf_matrix
 from nlosplan.simulators.mitsuba.fidelity import resolve_twin_fidelity
 from nlosplan.simulators.mitsuba.geometry import detection, film_time_axis, flash_texture, time_grid
@@ -199,14 +199,23 @@ class TwinSimulator:
         return out
 
     # ------------------------------------------------------------ sensor
-    def _to_bins(self, nodes: np.ndarray, overlap: bool = True) -> np.ndarray:
+    def _zone(self, nodes: np.ndarray):
+        """The sensor's per-zone terms on node transients (Z, K) (unchanged without any)."""
         s, grid = self.sensor, self.grid
-        pulse = pulse_boxes(s)
         x = jnp.asarray(nodes, jnp.float64) if _x64() else jnp.asarray(nodes)
         zv = zone_values(s, self.zone_ids)
         if any(v is not None for v in zv.values()):
             x = apply_zone_terms(x, grid.node_times(s.bin_width_ps, s.start_offset_ps), s.bin_width_ps / grid.oversample,
-                                 overlap=overlap, **zv)
+                                 **zv)
+        return x
+
+    def _to_bins(self, nodes, shift_ps=None) -> np.ndarray:
+        s, grid = self.sensor, self.grid
+        pulse = pulse_boxes(s)
+        x = jnp.asarray(nodes)
+        if shift_ps is not None:
+            x = move_nodes(x, grid.node_times(s.bin_width_ps, s.start_offset_ps), s.bin_width_ps / grid.oversample,
+                           offsets_ps=shift_ps)
         if pulse is None and s.sigma_ps == 0:
             return np.asarray(bin_nodes_without_irf(grid, x), dtype=np.float64)
         mat = irf_matrix(grid, bin_width_ps=s.bin_width_ps, sigma_ps=s.sigma_ps, pulse=pulse,
@@ -229,14 +238,21 @@ class TwinSimulator:
         """
         s = self.sensor
         tr = self.transient()
-        direct = s.photon_scale * self._to_bins(tr["direct"])
-        obj = s.photon_scale * self._to_bins(tr["object"])
-        z = direct.shape[0]
+        direct_n = s.photon_scale * self._zone(tr["direct"])
+        obj_n = s.photon_scale * self._zone(tr["object"])
+        z = direct_n.shape[0]
+        zv = zone_values(s, self.zone_ids)
+        g = np.ones(z) if zv["gains"] is None else zv["gains"]
+        when = np.zeros(z) if zv["offsets_ps"] is None else zv["offsets_ps"].copy()
+        shift = None
+        if s.time_walk_ps != 0:  # each zone's light, crosstalk included, is recorded earlier the brighter it is
+            flux = np.asarray(direct_n.sum(-1) + obj_n.sum(-1)) + s.crosstalk * g
+            shift = np.asarray(walk_shift_ps(flux, s.time_walk_ps), dtype=np.float64)
+            when = when + shift
+        direct = self._to_bins(direct_n, shift)
+        obj = self._to_bins(obj_n, shift)
         xt = np.zeros_like(direct)
         if s.crosstalk > 0:  # the zone's gain and time offset, no overlap
-            zv = zone_values(s, self.zone_ids)
-            g = np.ones(z) if zv["gains"] is None else zv["gains"]
-            when = np.zeros(z) if zv["offsets_ps"] is None else zv["offsets_ps"]
             xt = np.asarray(bin_arrivals(when[:, None], (s.crosstalk * g)[:, None], s.bin_edges_ps(),
                                          s.sigma_ps, pulse_boxes(s)), dtype=np.float64)
         bg = background_per_bin(s, self.scene.lights_on)
