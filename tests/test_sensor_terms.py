@@ -145,7 +145,7 @@ def test_fast_simulator_applies_the_zone_terms_on_its_node_transients():
     from nlosplan.simulators import FastSimulator, denali_scene
 
     scene = denali_scene().without_objects()
-    base = preset("tmf8828-3x3-short").replace(ambient_rate_hz=0.0, dark_rate_hz=0.0, pileup=False)
+    base = preset("tmf8828-3x3-short").linear_uniform().replace(ambient_rate_hz=0.0, dark_rate_hz=0.0)
     plain = FastSimulator(scene, base, fidelity="draft", dtype="float64").expected()
     gains = np.linspace(0.5, 1.5, 9)
     bw = base.bin_width_ps
@@ -171,7 +171,7 @@ def test_time_walk_moves_each_zone_by_its_own_light_in_the_pipeline_and_the_fast
     from nlosplan.simulators import FastSimulator, denali_scene
 
     scene = denali_scene().without_objects()
-    base = preset("tmf8828-3x3-short").replace(ambient_rate_hz=0.0, dark_rate_hz=0.0, pileup=False,
+    base = preset("tmf8828-3x3-short").linear_uniform().replace(ambient_rate_hz=0.0, dark_rate_hz=0.0,
                                                saturation=False, pulse_tail_fraction=0.0)
     parts = FastSimulator(scene, base, fidelity="draft", dtype="float64").expected(parts=True)
     flux = parts["direct"].reshape(9, -1).sum(-1) / base.iterations

@@ -70,6 +70,10 @@ def run_zones(args, t0: float) -> int:
         raise UserError(f"the captures have {n_zones} zones but sensor {base.name} has {base.n_zones}; "
                         "give a matching --sensor")
     zones = _zones(args.zones, n_zones) if args.zones else list(range(n_zones))
+    n_usable = int(np.sum(captures.distance_m >= min_d))
+    if args.folds and not 2 <= args.folds <= n_usable // 2:
+        raise UserError(f"--folds {args.folds} must be between 2 and {max(n_usable // 2, 2)} (half the {n_usable} "
+                        f"captures at d >= {min_d} m), or 0 for none")
     arrivals = plane_arrivals(base)
     note(args, f"calibrating {base.name} on {captures.distance_m.size} captures, zones {zones}, terms {terms} ...")
     fit = fit_plane_zones(captures, arrivals, base, zones=zones, terms=terms, min_distance_m=min_d)

@@ -222,6 +222,10 @@ class SensorConfig:
     def replace(self, **changes: Any) -> "SensorConfig":
         """Return a copy with some fields changed (validated again).
 
+        Changing the zone grid drops the per-zone values (they belong to one
+        unit's layout) and removing ``pulse_shape`` drops its tail, unless the
+        same call gives them.
+
         Raises
         ------
         UserError
@@ -238,7 +242,20 @@ class SensorConfig:
             # per-zone values belong to one unit's zone layout: another layout starts neutral
             for name in ZONE_FIELDS:
                 changes.setdefault(name, None)
+        if "pulse_shape" in changes and changes["pulse_shape"] is None:
+            changes.setdefault("pulse_tail_fraction", 0.0)  # the tail continues the measured pulse: it goes with it
         return dataclasses.replace(self, **changes)
+
+    def linear_uniform(self) -> "SensorConfig":
+        """This sensor made linear and alike in every zone.
+
+        No pile-up or dead time, no per-zone gains, offsets, time scales or
+        overlap, no time walk and no pulse tail; everything else kept. The
+        reference for physics checks that must not depend on one unit's
+        calibration (inverse-square law, symmetry, linear parts).
+        """
+        return self.replace(pileup=False, spads_per_zone=1, dead_time_ps=None, time_walk_ps=0.0,
+                            pulse_tail_fraction=0.0, **{name: None for name in ZONE_FIELDS})
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data dictionary (JSON/TOML friendly; ``pulse_shape`` as a list)."""

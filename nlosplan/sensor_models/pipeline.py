@@ -254,8 +254,9 @@ def expected_histogram(sensor: SensorConfig, times_ps, weights, *, lights_on: bo
         if xt > 0:  # crosstalk: the zone's gain and offset, no overlap
             xt = xt * (1.0 if zv["gains"] is None else jnp.asarray(zv["gains"], dt)[:, None])
             xt_t = 0.0 if zv["offsets_ps"] is None else jnp.asarray(zv["offsets_ps"], dt)[:, None]
-        if sensor.time_walk_ps != 0:
-            flux = sensor.photon_scale * jnp.sum(w, axis=-1, keepdims=True) + xt
+        if sensor.time_walk_ps != 0:  # the zone's light that arrives inside the window
+            inside = (t >= sensor.start_offset_ps) & (t < sensor.start_offset_ps + sensor.window_ps)
+            flux = sensor.photon_scale * jnp.sum(jnp.where(inside, w, 0.0), axis=-1, keepdims=True) + xt
             shift = walk_shift_ps(flux, sensor.time_walk_ps)
             t, xt_t = t + shift, xt_t + shift
         counts = _expected(sensor, t, w, lights_on, xt, xt_t)

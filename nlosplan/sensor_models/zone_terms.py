@@ -20,7 +20,8 @@ zone's view lit by the flash falls at short range, half at ``r = d0``.
 Crosstalk (light that never leaves the sensor, ``t = 0``) takes the gain and
 the offset but not the overlap. With a time walk ``w`` (ps per decade) the
 zone's light is recorded ``w log10(Lambda_z)`` earlier, ``Lambda_z`` its signal
-photons per iteration (after gain and overlap, crosstalk included).
+photons per iteration arriving inside the window (after gain, overlap and the
+zone's clock; crosstalk included).
 """
 
 from __future__ import annotations
@@ -175,3 +176,10 @@ def apply_zone_terms_arrivals(times_ps, weights, *, gains=None, offsets_ps=None,
 def walk_shift_ps(flux, walk_ps):
     """Time shift (ps, negative = earlier) of a zone with ``flux`` signal photons per iteration."""
     return -jnp.asarray(walk_ps) * jnp.log10(jnp.maximum(jnp.asarray(flux), 1e-30))
+
+
+def window_light(nodes, node_times_ps, start_ps, window_ps):
+    """Photons per iteration of each row of a node transient at times inside ``[start, start + window)``, (Z,)."""
+    t = jnp.asarray(node_times_ps)
+    inside = (t >= start_ps) & (t < start_ps + window_ps)
+    return jnp.sum(jnp.where(inside[None, :], jnp.asarray(nodes), 0.0), axis=-1)

@@ -27,7 +27,7 @@ from nlosplan.sensor_models.calibration.plane_scores import ZoneTable, score_pla
 from nlosplan.sensor_models.config import SensorConfig
 
 #: Values whose jackknife error is reported (the pulse samples are left out).
-REPORTED = ("bin_width_ps", "start_offset_ps", "photon_scale", "iterations", "pulse_tail_fraction",
+REPORTED = ("bin_width_ps", "start_offset_ps", "photon_scale", "iterations", "time_walk_ps", "pulse_tail_fraction",
             "pulse_tail_decay_ps", "zone_time_offsets_ps", "zone_time_scales", "zone_gains", "zone_overlap_m")
 
 

@@ -37,7 +37,7 @@ from nlosplan.constants import C_M_PER_PS, FWHM_PER_SIGMA, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
-from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps
+from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
 #: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
@@ -328,8 +328,8 @@ def _walked(static, arrays, scene_p, terms, bw, t0):
     if static.objects:
         parts[1] = sp["photon_scale"] * zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
                                                    bw, t0)
-    shift = walk_shift_ps(sum(p.sum(-1) for p in parts), static.walk_ps)
     times = static.grid.node_times(bw, t0)
+    shift = walk_shift_ps(sum(window_light(p, times, t0, bw * static.grid.n_bins) for p in parts), static.walk_ps)
     delta = bw / static.grid.oversample
     return tuple(to_bins(move_nodes(p, times, delta, offsets_ps=shift)) for p in parts)
 

@@ -36,7 +36,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import (background_per_bin, bin_arrivals, counts_from_rates, dead_bins, pulse_boxes,
                                              sample_counts)
-from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, zone_values
+from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light, zone_values
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit_at, irf_extent_ps, irf_matrix
 from nlosplan.simulators.mitsuba.fidelity import resolve_twin_fidelity
 from nlosplan.simulators.mitsuba.geometry import detection, film_time_axis, flash_texture, time_grid
@@ -246,7 +246,8 @@ class TwinSimulator:
         when = np.zeros(z) if zv["offsets_ps"] is None else zv["offsets_ps"].copy()
         shift = None
         if s.time_walk_ps != 0:  # each zone's light, crosstalk included, is recorded earlier the brighter it is
-            flux = np.asarray(direct_n.sum(-1) + obj_n.sum(-1)) + s.crosstalk * g
+            times = self.grid.node_times(s.bin_width_ps, s.start_offset_ps)
+            flux = np.asarray(window_light(direct_n + obj_n, times, s.start_offset_ps, s.window_ps)) + s.crosstalk * g
             shift = np.asarray(walk_shift_ps(flux, s.time_walk_ps), dtype=np.float64)
             when = when + shift
         direct = self._to_bins(direct_n, shift)
