@@ -109,3 +109,11 @@ def test_unknown_terms_and_too_few_captures_are_one_line_errors(simulated):
     truth, caps = simulated
     with pytest.raises(UserError, match="needs >= 3 captures"):
         fit_plane_zones(caps, _arrivals(truth), truth, indices=[0, 1])
+
+
+def test_a_fit_stopped_by_its_budget_says_so_with_its_best_objective(simulated):
+    truth, caps = simulated
+    fit = fit_plane_zones(caps, _arrivals(truth), truth, terms=("offsets", "gains"), max_evals=(3, 3, 3))
+    assert not fit.converged
+    assert any("did not converge within 3 evaluations" in m and f"best mean deviance {fit.deviance:.4g}" in m
+               for m in fit.messages)
