@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from typing import Sequence
 
-from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, rig as rig_bench
+from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, real as real_bench, rig as rig_bench
 
 from nlosplan.cli.common import command_group, emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
@@ -171,6 +171,7 @@ def add(sub) -> None:
     rig_bench.add_bench(bsub)
     fidelity_bench.add_bench(bsub)
     live_bench.add_bench(bsub)
+    real_bench.add_bench(bsub)
 
 
 BENCH_SIMULATE_DESCRIPTION = """\

@@ -124,7 +124,9 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
     from nlosplan.planner.capture.closed_loop import ClosedLoop
     from nlosplan.data.store import CaptureStore
 
-    sensor = sensor_preset(args.zones, args.range_mode)
+    # the capture planner's counts model is linear and alike in every zone: the preset without its pile-up and
+    # per-zone calibration terms (those serve the realism checks, 'nlosplan bench real')
+    sensor = sensor_preset(args.zones, args.range_mode).linear_uniform()
     scene_fn = denali_scene_fn(args.object, args.size, "off")
     (x0, x1), (y0, y1) = args.limits
     cand = screen_candidates(grid_points(args.grid, args.grid, (x0, x1), (y0, y1)), limits=args.limits,
