@@ -207,6 +207,8 @@ def plan_object(
     grid: TimeGrid,
     reach_ps: tuple[float, float],
     prune: bool,
+    kind: str | None = None,
+    part: str = "",
 ) -> tuple[ObjectPlan | None, list]:
     """Plan one object's term for all poses in ``obj_list``.
 
@@ -229,9 +231,17 @@ def plan_object(
         Arrival times that can reach the window through the impulse response.
     prune : bool
         Leave out what cannot contribute (False: compute everything, for tests).
+    kind : {"retroreflective", "lambertian"}, optional
+        The transport of this term (default: the object's reflectance); the
+        diffuse base of a retroreflective object is a ``"lambertian"`` term.
+    part : str
+        Name of the part in :func:`explain` lines (e.g. ``"diffuse base"``).
     """
     obj = obj_list[0]
+    kind = obj.reflectance if kind is None else kind
     label = f"object {obj.name!r}" if len({id(o.mesh) for o in obj_list}) == 1 else f"objects ({obj.reflectance})"
+    if part:
+        label = f"{label}: {part}"
     notes: list = []
     groups, mesh_index = _by_mesh(obj_list)
     vis_list = [_visible_faces(g, scene) for g in groups]
@@ -247,7 +257,7 @@ def plan_object(
     n_vis = int(vis_list[0].sum())
     n_faces = len(vis_list[0])
     centers, radii = _bounding_spheres(obj_list)
-    retro = obj.reflectance == "retroreflective"
+    retro = kind == "retroreflective"
     lobe_sigma = math.radians(obj.lobe_fwhm_deg) / FWHM_PER_SIGMA
     lobe = retro and lobe_sigma > 0
 
@@ -397,7 +407,8 @@ def plan_object(
         fft_len = n1 + n2
         static = ObjectStatic("lambertian", 0, 0, False, len(obj_zones), n1=n1, n2=n2, fft_len=fft_len)
         paths = m * (len(flash) + len(det))
-        how = (f"Lambertian, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
+        what = f"Lambertian (albedo {_albedo_range(obj_list, part)})" if part else "Lambertian"
+        how = (f"{what}, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
                f"wall cells, detection leg {m} x {len(det)} zone cells, legs convolved in time")
     notes.insert(0, (True, label, how))
     if n_hidden:
@@ -445,6 +456,12 @@ def _pad_cells(static: ObjectStatic, arrays: dict, near_index: dict) -> tuple[Ob
         padded[leg] = [np.concatenate([i, np.full(near[leg] - len(i), size)]).astype(np.int64)
                        for i in near_index[leg]]
     return dataclasses.replace(static, near1=near["1"], near2=near["2"]), padded
+
+
+def _albedo_range(obj_list: list[HiddenObject], part: str) -> str:
+    """The diffuse albedo(s) of a diffuse-base term over the batch, as text."""
+    vals = sorted({o.diffuse_albedo for o in obj_list})
+    return f"{vals[0]:g}" if len(vals) == 1 else f"{vals[0]:g}..{vals[-1]:g}"
 
 
 def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:

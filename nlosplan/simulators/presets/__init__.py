@@ -16,6 +16,7 @@ from nlosplan.simulators.presets.denali import (
     mount_mesh,
     object_mesh,
     object_pose,
+    plate_pose,
     positions_xy,
     rig,
 )
@@ -32,6 +33,7 @@ __all__ = [
     "mount_mesh",
     "object_mesh",
     "object_pose",
+    "plate_pose",
     "positions_xy",
     "rig",
 ]

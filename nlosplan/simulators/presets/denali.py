@@ -26,11 +26,24 @@ Localization labels
 constant (0.038, 0.028) m (in x, y) from the averaged tag-1 poses that place
 the mesh; both are kept as published.
 
+Mount
+-----
+The object mount (``object_mount.obj``, a 7.6 x 7.5 cm post from the table
+up to the object) and its plate (``object_mount_plate.obj``, with tag 1 on
+it) move with the gantry. DENALI's twin places the plate at ``T(tag 1) .
+Rx(-90 deg)`` and the mount at the object's pose, both diffuse 0.8 (its
+``PARTS_REFL``, visual pass only). :func:`mount_mesh` merges the two in
+the object frame. DENALI names the post "object mount", so its background
+capture ``NOOBJECTMOUNT`` most likely has no mount and ``NOOBJECT`` the
+bare mount: the mount is a fixture (kept in the background) by default.
+
 Assumptions (to be calibrated against captures)
 -----------------------------------------------
-- Object albedo 0.5 and a 2 deg FWHM retroreflective lobe.
+- Object albedo 0.5 and a 2 deg FWHM retroreflective lobe, no diffuse base
+  (DENALI's Table 2 cannot separate a diffuse base from the retroreflective
+  part: see ``docs/scene-physics.md``).
 - Relay-wall albedo 0.8 and table albedo 0.5 (the twin's table colour is
-  (0.6, 0.5, 0.4)); the object mount is Lambertian with albedo 0.8.
+  (0.6, 0.5, 0.4)); the mount and plate are Lambertian with albedo 0.8.
 - The TMF8828 zone grid looks like the co-located camera image: sensor
   right = camera x, up = -camera y, zone row 0 at the top of the image.
 """
@@ -51,7 +64,7 @@ from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene
 
 __all__ = [
     "CLASS_GROUPS", "DENALI_OBJECTS", "N_POSITIONS", "SIZES", "class_group", "denali_scene",
-    "mount_mesh", "object_mesh", "object_pose", "positions_xy", "rig",
+    "mount_mesh", "object_mesh", "object_pose", "plate_pose", "positions_xy", "rig",
 ]
 
 CLASS_GROUPS: dict[str, tuple[str, ...]] = {
@@ -70,6 +83,7 @@ TABLE_SIZE = (0.78, 1.524)  # along tag x, along tag y (metres)
 _TAG_MARGIN = 0.068 / 2  # half the wall tags' printed size (metres)
 _WALL_TAG_DROP = 0.186  # tag 5 above the wall's bottom edge (metres)
 _MOUNT_OFFSET = (0.0, -0.005, -0.04)  # object/mount frame offset from tag 1 (metres)
+MOUNT_ALBEDO = 0.8  # DENALI twin's PARTS_REFL (diffuse) for the mount and plate
 
 
 def _data():
@@ -142,8 +156,23 @@ def object_mesh(obj: str, size: str) -> Mesh:
 
 @lru_cache(maxsize=None)
 def mount_mesh() -> Mesh:
-    """Mesh of the object mount (the post that holds the object), metres, object frame."""
-    return _load_packaged("object_mount.obj", name="object_mount")
+    """Mesh of the object mount and its plate, metres, in the object frame.
+
+    Returns
+    -------
+    Mesh
+        The post (``object_mount.obj``, 33 cm tall, from the table up to the
+        object) and the plate (``object_mount_plate.obj``, moved from its
+        tag-1 frame into the object frame by the inverse of DENALI's
+        ``translate(0, -0.005, -0.04)``), one rigid body: place it with
+        :func:`object_pose`.
+    """
+    post = _load_packaged("object_mount.obj", name="object_mount")
+    plate = _load_packaged("object_mount_plate.obj", name="object_mount_plate")
+    shift = -np.asarray(_MOUNT_OFFSET)
+    v = np.concatenate([post.vertices, plate.vertices + shift])
+    f = np.concatenate([post.faces, plate.faces + len(post.vertices)])
+    return Mesh(vertices=v, faces=f, name="object_mount")
 
 
 @lru_cache(maxsize=None)
@@ -155,6 +184,14 @@ def _object_poses() -> np.ndarray:
     out = np.stack([_tag(poses[str(p)]) @ rx @ offset for p in range(N_POSITIONS)])
     out.setflags(write=False)
     return out
+
+
+def plate_pose(position: int) -> np.ndarray:
+    """Pose of the mount plate (tag 1's frame turned z-up) at a gantry position, shape (4, 4).
+
+    ``object_pose(p) @ inv(translate(0, -0.005, -0.04))``: what DENALI's twin uses for the plate.
+    """
+    return object_pose(position) @ rigid_transform(translation=-np.asarray(_MOUNT_OFFSET))
 
 
 def object_pose(position: int) -> np.ndarray:
@@ -262,7 +299,8 @@ def _check_lights(lights: Any) -> bool:
 
 def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: str | bool = "off", *,
                  reflectance: str = "retroreflective", albedo: float = 0.5, lobe_fwhm_deg: float = 2.0,
-                 mount: bool = False, wall_albedo: float = 0.8, table_albedo: float = 0.5,
+                 diffuse_albedo: float = 0.0, mount: bool = False, mount_albedo: float = MOUNT_ALBEDO,
+                 mount_in_background: bool = True, wall_albedo: float = 0.8, table_albedo: float = 0.5,
                  tables: bool = True) -> Scene:
     """One DENALI capture as a scene.
 
@@ -278,8 +316,18 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     reflectance : {"retroreflective", "lambertian"}
         Object reflectance model; ``albedo`` and ``lobe_fwhm_deg`` (degrees)
         are its parameters (assumed values by default).
+    diffuse_albedo : float
+        Lambertian base of a retroreflective object (0: pure retroreflector;
+        ``albedo + diffuse_albedo <= 1``).
     mount : bool
-        Add the object mount as a second, Lambertian (albedo 0.8) object.
+        Add the object mount and its plate (:func:`mount_mesh`, Lambertian)
+        as a second object that moves with the gantry.
+    mount_albedo : float
+        The mount's Lambertian albedo (DENALI's twin: 0.8).
+    mount_in_background : bool
+        The mount is a fixture that stays in the background capture (DENALI's
+        NOOBJECT with the bare mount: it cancels from the signal); False
+        leaves it in the signal (a background without the mount).
     wall_albedo, table_albedo : float
         Relay-wall and table albedos.
     tables : bool
@@ -310,15 +358,20 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     lidar, wall, planes = rig(wall_albedo=wall_albedo, table_albedo=table_albedo, tables=tables)
     pose = _object_poses()[p]
     objects = [HiddenObject(mesh=object_mesh(name, size), to_world=pose, reflectance=reflectance,
-                            albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}")]
+                            albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}",
+                            diffuse_albedo=diffuse_albedo)]
+    if not isinstance(mount, (bool, np.bool_)) or not isinstance(mount_in_background, (bool, np.bool_)):
+        raise UserError("mount and mount_in_background must be true or false")
     if mount:
         objects.append(HiddenObject(mesh=mount_mesh(), to_world=pose, reflectance="lambertian",
-                                    albedo=0.8, name="object mount"))
+                                    albedo=mount_albedo, name="object mount", fixture=bool(mount_in_background)))
     xy = _labels()[p, :2]
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": class_group(name),
         "lights": "on" if on else "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": reflectance,
-        "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg, "mount": bool(mount),
+        "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg,
+        "diffuse_albedo": objects[0].diffuse_albedo, "mount": bool(mount),
+        **({"mount_albedo": objects[1].albedo, "mount_in_background": bool(mount_in_background)} if mount else {}),
         "wall_albedo": wall.albedo, "tables": bool(tables),
     }
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=tuple(objects), lights_on=on,
