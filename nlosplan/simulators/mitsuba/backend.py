@@ -36,9 +36,10 @@ def simulate(scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", z
              variant: str = "auto", illumination: str = "flash"):
     """Expected capture, NOOBJECT background, signal, parts and optional noisy captures, by the twin.
 
-    The background is the same render without the three-bounce term (the
-    twin's direct wall return does not depend on the hidden objects), so the
-    signal is exactly the object's three-bounce counts through the pipeline.
+    The background is the same render without the hidden objects' three-bounce
+    term (the twin's direct wall return does not depend on them); fixtures
+    (the mount) stay in it, so the signal is exactly the objects'
+    three-bounce counts through the pipeline.
 
     Returns
     -------
@@ -57,6 +58,7 @@ def simulate(scene, sensor, *, rng=None, repeats: int = 0, fidelity="default", z
     out = sim.expected(parts=True)
     bg_sim = TwinSimulator(scene.without_objects(), sensor, fidelity=fidelity, zones=zones, seed=seed,
                            variant=variant, illumination=illumination)
-    bg_sim._transient = {**sim.transient(), "object": np.zeros_like(sim.transient()["object"])}
+    tr = sim.transient()
+    bg_sim._transient = {**tr, "object": tr["fixture"]}
     return assemble_result(sim, out, bg_sim, rng, repeats, plan=None, t0=t0,
                            meta={**scene.meta, "twin": sim.describe()})

@@ -33,7 +33,7 @@ up to the object) and its plate (``object_mount_plate.obj``, with tag 1 on
 it) move with the gantry. DENALI's twin places the plate at ``T(tag 1) .
 Rx(-90 deg)`` and the mount at the object's pose, both diffuse 0.8 (its
 ``PARTS_REFL``, visual pass only). :func:`mount_mesh` merges the two in
-the object frame. DENALI names the post "object mount", so its background
+separate objects. DENALI names the post "object mount", so its background
 capture ``NOOBJECTMOUNT`` most likely has no mount and ``NOOBJECT`` the
 bare mount: the mount is a fixture (kept in the background) by default.
 
@@ -64,7 +64,7 @@ from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene
 
 __all__ = [
     "CLASS_GROUPS", "DENALI_OBJECTS", "N_POSITIONS", "SIZES", "class_group", "denali_scene",
-    "mount_mesh", "object_mesh", "object_pose", "plate_pose", "positions_xy", "rig",
+    "mount_mesh", "object_mesh", "object_pose", "plate_mesh", "plate_pose", "positions_xy", "rig",
 ]
 
 CLASS_GROUPS: dict[str, tuple[str, ...]] = {
@@ -156,23 +156,21 @@ def object_mesh(obj: str, size: str) -> Mesh:
 
 @lru_cache(maxsize=None)
 def mount_mesh() -> Mesh:
-    """Mesh of the object mount and its plate, metres, in the object frame.
+    """Mesh of the object mount (the 33 cm post from the table up to the object), metres, object frame.
 
-    Returns
-    -------
-    Mesh
-        The post (``object_mount.obj``, 33 cm tall, from the table up to the
-        object) and the plate (``object_mount_plate.obj``, moved from its
-        tag-1 frame into the object frame by the inverse of DENALI's
-        ``translate(0, -0.005, -0.04)``), one rigid body: place it with
-        :func:`object_pose`.
+    Place it with :func:`object_pose`.
     """
-    post = _load_packaged("object_mount.obj", name="object_mount")
-    plate = _load_packaged("object_mount_plate.obj", name="object_mount_plate")
-    shift = -np.asarray(_MOUNT_OFFSET)
-    v = np.concatenate([post.vertices, plate.vertices + shift])
-    f = np.concatenate([post.faces, plate.faces + len(post.vertices)])
-    return Mesh(vertices=v, faces=f, name="object_mount")
+    return _load_packaged("object_mount.obj", name="object_mount")
+
+
+@lru_cache(maxsize=None)
+def plate_mesh() -> Mesh:
+    """Mesh of the mount plate (8 x 8 x 1 cm, tag 1 on it), metres, in tag 1's z-up frame.
+
+    Place it with :func:`plate_pose`. It overlaps the top of the post, so it
+    is a separate object (the twin renders overlapping meshes apart).
+    """
+    return _load_packaged("object_mount_plate.obj", name="object_mount_plate")
 
 
 @lru_cache(maxsize=None)
@@ -320,8 +318,9 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
         Lambertian base of a retroreflective object (0: pure retroreflector;
         ``albedo + diffuse_albedo <= 1``).
     mount : bool
-        Add the object mount and its plate (:func:`mount_mesh`, Lambertian)
-        as a second object that moves with the gantry.
+        Add the object mount and its plate (:func:`mount_mesh`,
+        :func:`plate_mesh`, Lambertian) as two more objects that move with
+        the gantry.
     mount_albedo : float
         The mount's Lambertian albedo (DENALI's twin: 0.8).
     mount_in_background : bool
@@ -363,8 +362,9 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     if not isinstance(mount, (bool, np.bool_)) or not isinstance(mount_in_background, (bool, np.bool_)):
         raise UserError("mount and mount_in_background must be true or false")
     if mount:
-        objects.append(HiddenObject(mesh=mount_mesh(), to_world=pose, reflectance="lambertian",
-                                    albedo=mount_albedo, name="object mount", fixture=bool(mount_in_background)))
+        for mesh, to_world, label in ((mount_mesh(), pose, "object mount"), (plate_mesh(), plate_pose(p), "mount plate")):
+            objects.append(HiddenObject(mesh=mesh, to_world=to_world, reflectance="lambertian", albedo=mount_albedo,
+                                        name=label, fixture=bool(mount_in_background)))
     xy = _labels()[p, :2]
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": class_group(name),
