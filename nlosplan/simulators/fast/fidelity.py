@@ -63,7 +63,9 @@ class Fidelity:
 #: On DENALI 3x3, relative L1 of the three-bounce part: retroreflective mix against the fast reference
 #: draft ~6 %, low <= 2 %, default 0.3-1.2 % (flash_sub limits small objects), high <= 0.25 %; Lambertian
 #: objects against the converged Mitsuba twin (``nlosplan bench fidelity``) draft ~3 %, low ~0.9 %,
-#: default ~0.6 %, high ~0.6 % (a ~0.5 % floor: the two simulators' systematic difference). Lambertian
+#: default ~0.6 %, high ~0.6 % (a ~0.5 % floor: the two simulators' systematic difference). The reference's
+#: diffuse base has 2,048 samples: a Lambertian term over its 120 x 120 flash cells costs ~1 GB per 1,000 samples
+#: (16,384 ran out of memory), and the base is a few per cent of a mixed object's signal. Lambertian
 #: objects see the wall lit outside the field of view, so the outer flash cells (``flash_outer``,
 #: geometric in width from the zone pitch) set their error: 4 outer cells at default gave 2.7 %.
 FIDELITY_LEVELS: dict[str, Fidelity] = {
@@ -75,7 +77,7 @@ FIDELITY_LEVELS: dict[str, Fidelity] = {
     "high": Fidelity(zone_sub=6, flash_sub=8, flash_outer=12, object_samples=1536, time_oversample=4,
                      diffuse_samples=512),
     "reference": Fidelity(zone_sub=8, flash_sub=24, flash_outer=24, object_samples=16384, time_oversample=8,
-                          diffuse_samples=16384),
+                          diffuse_samples=2048),
 }
 
 

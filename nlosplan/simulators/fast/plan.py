@@ -337,11 +337,13 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     obj_index: list[int] = []
     obj_albedo: list[str] = []
     warnings: list[str] = []
+    cells: dict = {}  # wall cells of the plan, built once and shared by every object term
     for k, obj in enumerate(base.objects):
         objs = [sc.objects[k] for sc in scenes]
         parts, extra = _object_parts(objs, fid)
         for i, (kind, part, attr, f) in enumerate(parts):
-            plan, notes = plan_object(k, objs, base, sensor, f, zones_out, grid, reach, prune, kind=kind, part=part)
+            plan, notes = plan_object(k, objs, base, sensor, f, zones_out, grid, reach, prune, kind=kind, part=part,
+                                      cells=cells)
             terms.extend(Term(*n) for n in notes)
             if i == 0:
                 terms.extend(extra)

@@ -209,6 +209,7 @@ def plan_object(
     prune: bool,
     kind: str | None = None,
     part: str = "",
+    cells: dict | None = None,
 ) -> tuple[ObjectPlan | None, list]:
     """Plan one object's term for all poses in ``obj_list``.
 
@@ -236,6 +237,9 @@ def plan_object(
         diffuse base of a retroreflective object is a ``"lambertian"`` term.
     part : str
         Name of the part in :func:`explain` lines (e.g. ``"diffuse base"``).
+    cells : dict, optional
+        Wall cells already built for this plan, by kind and grid knobs,
+        filled here when missing: the terms of one plan share them.
     """
     obj = obj_list[0]
     kind = obj.reflectance if kind is None else kind
@@ -262,7 +266,12 @@ def plan_object(
     lobe = retro and lobe_sigma > 0
 
     ext = flash_extent_tan(sensor)
-    flash = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
+    cells = {} if cells is None else cells
+    key = ("flash", fid.flash_sub, fid.flash_outer)
+    if key not in cells:
+        cells[key] = wall_cells(scene.lidar, scene.wall, scene.planes, sensor,
+                                tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
+    flash = cells[key]
     zones_set = set(int(z) for z in zones_out)
     row_of = {int(z): i for i, z in enumerate(zones_out)}
     arrays: dict = {"lobe_sigma": np.array(lobe_sigma)}
@@ -298,7 +307,11 @@ def plan_object(
             zone_lo = {z: lo_all for z in zones_set}
             zone_hi = {z: hi_all for z in zones_set}
     else:
-        det = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.zone_sub), "zone")
+        key = ("zone", fid.zone_sub)
+        if key not in cells:
+            cells[key] = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.zone_sub),
+                                    "zone")
+        det = cells[key]
         det = det.select(np.isin(det.zone, list(zones_set)))
         t1_lo, t1_hi = _leg_bounds(flash, centers, radii)
         t2_lo, t2_hi = _leg_bounds(det, centers, radii)
