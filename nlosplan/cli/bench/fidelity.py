@@ -17,11 +17,15 @@ JSON: {"rows": [{"backend", "fidelity", "seconds", "rel_l1_error"}...],
 "speedup_at_equal_error": number, "speedups", "reference", "config"}."""
 
 CROSSVAL_DESCRIPTION = """\
-Cross-validation of the twin against the fast backend on the DENALI rig with
-Lambertian objects: every object x size x position, normalized relative L1 of
-the background-subtracted three-bounce histogram (target <= 5 %) and centroid
-shift (target <= 0.5 bin, zones with >= 5 % of the signal). About 2 minutes
-for the default 60 cases on 2 cores. JSON: {"cases": [...], "summary": {...}}."""
+Cross-validation of the twin against the fast backend on the DENALI rig: every
+reflectance model x object x size x position, normalized relative L1 of the
+three-bounce histogram (target <= 5 %) and centroid shift (target <= 0.5 bin,
+zones with >= 5 % of the signal). Models: lambertian (albedo 0.5), mixed (a
+2 deg retroreflective lobe of 0.4 on a Lambertian base of 0.4), mount (a
+Lambertian object with the mount and plate, 0.8, in the signal). About 2
+minutes per model for 60 cases on 2 cores. JSON: {"cases": [{"model",
+"object", "size", "position", "rel_l1", "centroid_shift_bins", "total_ratio",
+...}...], "summary": {...}, "config": {...}}."""
 
 
 def _cmd_fidelity(args) -> int:
@@ -50,18 +54,21 @@ def _cmd_fidelity(args) -> int:
 def _cmd_crossval(args) -> int:
     from nlosplan.simulators.mitsuba.crossval import cross_validate, format_table
 
+    from nlosplan.simulators.mitsuba.crossval import check_models
+
+    models = check_models(m.strip() for m in args.models.split(",") if m.strip())
     objects = [o.strip() for o in args.objects.split(",") if o.strip()]
     sizes = [z.strip() for z in args.sizes.split(",") if z.strip()]
     positions = range(0, 100, 100 // args.positions)[: args.positions]
-    n = len(objects) * len(sizes) * len(positions)
+    n = len(models) * len(objects) * len(sizes) * len(positions)
     with progress_bar(args, n, "bench crossval", "case") as bar:
         def progress(text):
             if bar is not None:
                 bar.set_postfix_str(text[:60])
                 bar.update(1)
 
-        result = cross_validate(objects, sizes, positions, twin_fidelity={"spp": args.spp, "zone_sub": 8},
-                                seed=args.seed, progress=progress)
+        result = cross_validate(objects, sizes, positions, models=models,
+                                twin_fidelity={"spp": args.spp, "zone_sub": 8}, seed=args.seed, progress=progress)
     emit(args, result, format_table(result))
     return 0 if result["summary"]["passed"] == result["summary"]["cases"] else 1
 
@@ -82,8 +89,11 @@ def add_bench(bsub) -> None:
     p.add_argument("--plot", default="", help="PNG of error against run time (default: none)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_fidelity)
-    c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (Lambertian DENALI)",
-                CROSSVAL_DESCRIPTION, "nlosplan bench crossval --objects A,circle,3 --sizes 4in,8in --positions 10 --json")
+    c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (DENALI: Lambertian, "
+                "mixed reflectance, mount)", CROSSVAL_DESCRIPTION,
+                "nlosplan bench crossval --models lambertian,mixed,mount --objects A,circle,3 --positions 10 --json")
+    c.add_argument("--models", default="lambertian,mixed,mount",
+                   help="reflectance models, comma-separated: lambertian, mixed, mount (default: %(default)s)")
     c.add_argument("--objects", default="A,circle,3", help="DENALI objects (default: %(default)s)")
     c.add_argument("--sizes", default="4in,8in", help="sizes (default: %(default)s)")
     c.add_argument("--positions", type=int_type(1, 100), default=10,
