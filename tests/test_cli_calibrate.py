@@ -113,14 +113,14 @@ def test_a_file_that_is_neither_json_nor_a_store_is_one_line(tmp_path, capsys):
 def test_score_only_the_shipped_preset_meets_the_targets_on_the_plane_data(real, capsys):
     """The preset was fitted on these captures (in sample): the score path and the preset reproduce the data."""
     data, _ = real
-    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-short", "--json"]) == 0
+    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-plane-unit", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["kind"] == "plane" and [z["zone"] for z in res["zones"]] == list(range(9))
     for z in res["zones"]:
         assert z["n"] >= 65
         assert z["subbin_err_mean"] < 0.08 and z["l1_mean"] < 0.06 and z["l1_max"] < 0.14, z
         assert 0.9 < z["amp_ratio_min"] and z["amp_ratio_max"] < 1.15, z
-    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-short"]) == 0
+    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-plane-unit"]) == 0
     text = capsys.readouterr().out
     assert "targets: sub-bin error met, L1 mean met, L1 max met, amplitude met" in text
 

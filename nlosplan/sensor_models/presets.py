@@ -13,7 +13,8 @@ Sources
   (``nlosplan calibrate``, :mod:`nlosplan.calibration.plane_fit`):
   per-zone time offsets, time scales, gains and near-field overlap, first-photon
   pile-up at the captures' iterations, time walk, pulse with its tail. Values of
-  that one unit (:data:`PLANE_UNIT`), given to ``tmf8828-3x3-short`` only.
+  that one unit (:data:`PLANE_UNIT`), in the preset ``tmf8828-3x3-plane-unit``
+  only (another TMF8828, DENALI's among them, has its own).
 - DRV: the DENALI / cc-hardware driver constant for long range (260 ps bins).
 - ST: ST UM3183 and the cc-hardware VL53L8CH driver (compact normalised
   histograms: bins of ~37.5 mm = 250 ps, up to 32 bins, pulse ~10 bins wide).
@@ -162,9 +163,9 @@ def _vl53l8ch() -> SensorConfig:
 
 
 def _plane_unit_3x3() -> SensorConfig:
-    """The 3x3 short-range preset: the plane unit's fitted values (UNIT) on the DS geometry."""
+    """The plane captures' unit: the 3x3 short-range preset with that unit's fitted values (UNIT)."""
     u = PLANE_UNIT
-    base = _tmf8828_short(3, 3, (33.0, 32.0), u["iterations"], "tmf8828-3x3-short")
+    base = _tmf8828_short(3, 3, (33.0, 32.0), u["iterations"], "tmf8828-3x3-plane-unit")
     notes = PLANE_UNIT_NOTES.format(iterations=f"{u['iterations'] / 1e6:.2f}M", walk=f"{u['time_walk_ps']:g}",
                                     scores=PLANE_UNIT_SCORES)
     return base.replace(
@@ -182,7 +183,8 @@ def _plane_unit_3x3() -> SensorConfig:
 
 def _builders() -> dict:
     return {
-        "tmf8828-3x3-short": _plane_unit_3x3,
+        "tmf8828-3x3-short": lambda: _tmf8828_short(3, 3, (33.0, 32.0), 550_000, "tmf8828-3x3-short"),
+        "tmf8828-3x3-plane-unit": _plane_unit_3x3,
         "tmf8828-4x4-short": lambda: _tmf8828_short(4, 4, (41.0, 52.0), 550_000, "tmf8828-4x4-short"),
         "tmf8828-8x8-short": lambda: _tmf8828_short(8, 8, (41.0, 52.0), 125_000, "tmf8828-8x8-short"),
         "tmf8828-3x3-long": _tmf8828_3x3_long,
