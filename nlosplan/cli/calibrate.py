@@ -101,8 +101,10 @@ def _bootstrap(args, cal):
 def _write(args, cal) -> dict:
     """The calibrated sensor file (--out) and the residual plot (--plot), as {kind: path}."""
     files = {}
-    if args.out:
-        cal.sensor.save(args.out)
+    if args.out:  # written atomically, naming the preset it refines (base) when there is one
+        from nlosplan.sensor_models import sensor_base
+
+        cal.sensor.save(args.out, base=sensor_base(args.sensor))
         files["sensor"] = str(args.out)
     if args.plot:
         from nlosplan.reports.calibration_plot import plot_calibration
