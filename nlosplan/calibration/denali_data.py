@@ -186,7 +186,7 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
                 return _from_store(st, where, str(path))
     if path.exists() and not is_capture_store(path):
         raise UserError(f"{path} is neither a DENALI-layout folder nor a capture store (.sqlite)")
-    with CaptureStore(path, create=False) as st:
+    with CaptureStore(path, readonly=True) as st:
         return _from_store(st, where, str(path))
 
 

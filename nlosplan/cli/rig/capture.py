@@ -284,7 +284,7 @@ def _cmd_status(args) -> int:
     from nlosplan.hardware.status import run_status
     from nlosplan.data.store import CaptureStore
 
-    with CaptureStore(args.store, create=False) as store:
+    with CaptureStore(args.store, readonly=True) as store:
         rows = run_status(store, args.run)
     lines = []
     for r in rows:
