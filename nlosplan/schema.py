@@ -70,6 +70,8 @@ def load_table(path, what: str = "file", *, suffixes=(".toml", ".json")) -> dict
             return tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise UserError(f"{what} {p} is not valid TOML: {exc}") from None
+    if not text.strip():
+        raise UserError(f"{what} {p} is empty")
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

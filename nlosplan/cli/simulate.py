@@ -41,7 +41,6 @@ def _sensor_from_args(args):
         changes.update(zones_rows=rows, zones_cols=cols)
         parts.append(f"{rows}x{cols} zones")
         flags.append(f"--zones {rows}x{cols}")
-        _warn_zone_mode(s, rows, cols)
     if not changes:
         return s
     try:
@@ -50,11 +49,15 @@ def _sensor_from_args(args):
         raise UserError(f"{' '.join(flags)} on {s.name}: {exc}") from None
 
 
-def _warn_zone_mode(sensor, rows: int, cols: int) -> None:
+def _warn_zone_mode(args) -> None:
     """A warning line when --zones changes the zone grid of a sensor built for another zone mode."""
     from nlosplan.cli.common import warn
-    from nlosplan.sensor_models import PRESET_NAMES, preset
+    from nlosplan.sensor_models import PRESET_NAMES, preset, resolve_sensor
 
+    if args.zones is None:
+        return
+    rows, cols = args.zones
+    sensor = resolve_sensor(args.sensor)
     if (rows, cols) == (sensor.zones_rows, sensor.zones_cols):
         return
     text = (f"--zones {rows}x{cols} changes only the zone grid of {sensor.name} ({sensor.zones_rows}x"
@@ -285,10 +288,12 @@ def _outputs(args) -> tuple[Path | None, bool, Path | None]:
     return out, legacy, plot
 
 
-def _warn_legacy(args, out: Path, legacy: bool) -> None:
-    """The deprecation line of ``--out X.npy``, once every input passed its checks (before the work)."""
+def _warn_before_work(args, out: Path | None, legacy: bool) -> None:
+    """Warning lines (a preset's zone mode changed, the deprecated ``--out X.npy``), once every input passed its
+    checks: a bad input stays one line."""
     from nlosplan.cli.common import warn
 
+    _warn_zone_mode(args)
     if legacy:
         warn(f"--out {args.out} (a .npy file) is deprecated: give a folder, e.g. --out {out.with_suffix('')}, "
              f"to get {', '.join(NLOS_FILES.values() if args.scene != 'wall' else WALL_FILES.values())} in it")
@@ -331,13 +336,14 @@ def _simulate_nlos(args, sensor, out, legacy, plot) -> int:
     scene = _nlos_scene(args)
     fidelity = args.fidelity or "default"
     if out is None:  # --explain alone: the plan, no simulation, no files
+        _warn_before_work(args, None, False)
         plan, warned = _with_warning_lines(explain, scene, sensor, fidelity=fidelity, zones=zones)
         data = {"scene": {"kind": args.scene, "name": scene.name}, "sensor": sensor.name, "fidelity": fidelity,
                 "plan": plan.to_dict(), "warnings": warned}
         emit(args, data, plan.explain())
         return 0
     _check_memory(args, sensor, len(zones) if zones is not None else sensor.n_zones, out)
-    _warn_legacy(args, out, legacy)
+    _warn_before_work(args, out, legacy)
     note(args, f"simulating {scene.name} with {sensor.name} ({backend} backend, fidelity {fidelity}) ...")
     result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
                                          fidelity=fidelity, zones=zones, backend=backend, **_given(args, dtype="dtype"))
@@ -366,7 +372,7 @@ def _simulate_wall(args, sensor, out, legacy, plot) -> int:
     scene = WallScene(**_given(args, distance_m="distance", yaw_deg="yaw", pitch_deg="pitch", albedo="albedo"),
                       lights_on=args.lights == "on")
     _check_memory(args, sensor, sensor.n_zones, out)
-    _warn_legacy(args, out, legacy)
+    _warn_before_work(args, out, legacy)
     fidelity = _given(args, n_sub="samples")
     t0 = time.perf_counter()
     mean = simulate_wall(scene, sensor, **fidelity)
