@@ -129,17 +129,18 @@ EXAMPLES = {
         "nlosplan design                                   # the main job: DENALI preset, ~15 min on 2 cores",
         "nlosplan design --quick --json                    # reduced space, ~2 min",
         "nlosplan design --requirement 'loc<=0.03' --requirement 'size>=0.95@size=4in' --out out/d --resume",
+        "nlosplan design --quick --out out/d --overwrite        # start over where out/d holds a previous run",
         "nlosplan design --config my_space.toml --cluster local:4",
     ),
     "sensor list": "nlosplan sensor list",
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
     "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
     "simulate": (
-        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19.npy --plot out/a19.png",
+        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19 --plot",
         "nlosplan simulate --scene corner --object-xy 0.45,0.30 --object A_8in --reflectance retroreflective "
         "--zones 8x8 --explain",
         "nlosplan simulate --scene wall --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 "
-        "--out out/h.npy --plot out/h.png",
+        "--out out/wall --plot out/wall.png",
     ),
     "check": "nlosplan check --json",
     "bench histogram": "nlosplan bench histogram --json",
