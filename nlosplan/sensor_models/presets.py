@@ -230,4 +230,6 @@ def resolve_sensor(spec) -> SensorConfig:
     spec = str(spec)
     if spec.endswith((".toml", ".json")):
         return load_sensor_file(spec)
+    if spec not in PRESET_NAMES and Path(spec).exists():
+        raise UserError(f"sensor file {spec} must end in .toml or .json (or give a preset: {', '.join(PRESET_NAMES)})")
     return preset(spec)

@@ -198,7 +198,7 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         See :func:`binomial_interval`.
     class_names : sequence of str, optional
     chunk_bytes : int
-        Memory for the (draws x H*P) log-likelihood block of one chunk.
+        Memory for one chunk's (draws x H*P) log-likelihood block and its (draws x D) noisy captures.
     progress : callable, optional
         ``progress(done, total)`` in noisy captures after each chunk.
 
@@ -239,7 +239,8 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     total -= total.mean()
     members = [np.flatnonzero(class_of == c) for c in range(n_c)]
     decision = np.empty(truth_h.size, np.int64)
-    step = max(1, int(chunk_bytes // (8 * n_h * n_p)))
+    # a chunk's (draws x H*P) log-likelihoods and its (draws x D) captures both fit in chunk_bytes
+    step = max(1, int(chunk_bytes // (8 * max(n_h * n_p, log_lam.shape[1]))))
     for start in range(0, truth_h.size, step):
         th, tp = truth_h[start:start + step], truth_p[start:start + step]
         y = lam[th, tp]
