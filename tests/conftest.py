@@ -22,3 +22,28 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def grbl_sim_exe(tmp_path_factory) -> Path:
+    """GRBL 1.1h built with grbl-sim from ../shared/vendor, once per test run (skipped only without gcc/make)."""
+    from grbl_firmware import build_grbl_sim, missing_tools
+
+    missing = missing_tools()
+    if missing:
+        pytest.skip(f"real-firmware tests need {' and '.join(missing)} to build grbl-sim")
+    return build_grbl_sim(tmp_path_factory.mktemp("grbl-sim"))
+
+
+@pytest.fixture(params=[pytest.param("real", marks=pytest.mark.real_firmware), "emulated"])
+def grbl_device(request, tmp_path):
+    """The same GRBL scenarios on the real firmware (grbl-sim, fresh EEPROM) and on the project's emulator."""
+    from grbl_firmware import GrblFirmware, mirror_grbl
+
+    if request.param == "real":
+        dev = GrblFirmware(request.getfixturevalue("grbl_sim_exe"), tmp_path / "grbl-eeprom")
+    else:
+        dev = mirror_grbl()
+    dev.start()
+    yield dev
+    dev.close()

@@ -8,7 +8,7 @@ from nlosplan.sensor_models import preset
 from nlosplan.simulators import FastSimulator
 from nlosplan.tasks.bounds import counts_and_jacobian
 
-SENSOR = preset("tmf8828-3x3-short")
+SENSOR = preset("tmf8828-3x3-short").linear_uniform()  # the planner's counts model is linear
 POINTS = [[0.0, 0.0], [200.0, 120.0]]
 
 

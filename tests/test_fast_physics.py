@@ -44,7 +44,8 @@ def test_three_bounce_peak_at_the_geometric_path_length(reflectance):
 
 
 def test_first_bounce_falls_as_one_over_distance_squared():
-    s = preset("tmf8828-3x3-short").replace(pulse_shape=None, pulse_fwhm_ps=150.0, n_bins=512, saturation=False)
+    s = preset("tmf8828-3x3-short").linear_uniform().replace(pulse_shape=None, pulse_fwhm_ps=150.0, n_bins=512,
+                                                              saturation=False)
     totals = []
     for d in (0.5, 1.0):
         scene = corner_scene(wall_distance=d, wall_size=(6.0, 6.0)).without_objects()
@@ -79,7 +80,7 @@ def test_signal_decreases_monotonically_with_distance_from_the_lit_spot(reflecta
 
 def test_mirror_symmetric_scene_gives_mirror_symmetric_zones():
     # object at the LiDAR's height on a wall centred there: the scene is symmetric top/bottom
-    s = preset("tmf8828-3x3-short")
+    s = preset("tmf8828-3x3-short").linear_uniform()
     scene = corner_scene(object_xy=(0.45, 0.3), object_size=0.1, reflectance="lambertian")
     parts = FastSimulator(scene, s, fidelity=Fidelity(object_samples=2048), dtype="float64").expected(parts=True)
     np.testing.assert_allclose(parts["direct"][0], parts["direct"][2], rtol=1e-9)
@@ -103,7 +104,7 @@ def test_reciprocity_illumination_and_detection_grids_exchange():
 
 
 def test_first_bounce_matches_the_exact_impulse_binning_of_the_wall_scene():
-    s = preset("tmf8828-3x3-short").replace(dark_rate_hz=0.0, ambient_rate_hz=0.0, saturation=False)
+    s = preset("tmf8828-3x3-short").linear_uniform().replace(dark_rate_hz=0.0, ambient_rate_hz=0.0, saturation=False)
     wall = WallScene(distance_m=0.6, yaw_deg=20.0)
     exact = simulate_wall(wall, s, n_sub=4)
     n = wall.normal()

@@ -8,51 +8,63 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.hardware.emulators import EmulatedGrbl, EmulatedTMF8828
-from nlosplan.hardware.emulators.grbl import _profile
+from nlosplan.hardware.emulators.motion import Segment, trapezoid
 from nlosplan.hardware.grbl import Grbl, GrblAlarm
 from nlosplan.hardware.lights import EmulatedLights, FixedLights, ManualLights
 from nlosplan.hardware.tmf8828 import TMF8828
 
 
-def test_trapezoid_profile():
-    total, t_acc, vpk = _profile(100.0, 50.0, 500.0)         # reaches 50 mm/s after 0.1 s
+def test_trapezoid_profile_and_stop_by_deceleration():
+    total, t_acc, vpk = trapezoid(100.0, 50.0, 500.0)         # reaches 50 mm/s after 0.1 s
     assert (t_acc, vpk) == (0.1, 50.0) and total == pytest.approx(0.2 + (100 - 5) / 50)
-    total, t_acc, vpk = _profile(1.0, 50.0, 500.0)           # too short: a triangle
+    total, t_acc, vpk = trapezoid(1.0, 50.0, 500.0)           # too short: a triangle
     assert total == pytest.approx(2 * math.sqrt(1 / 500)) and vpk < 50
+    assert trapezoid(10.0, 5.0, 0.0) == (2.0, 0.0, 5.0)       # no acceleration limit: constant speed
+    seg = Segment((0.0, 0.0), (100.0, 0.0), 0.0, 50.0, 500.0)
+    stop = seg.stop(1.0)                                      # at 50 mm/s, 47.5 mm along: 2.5 mm to rest
+    assert stop.start[0] == pytest.approx(47.5) and stop.target[0] == pytest.approx(50.0)
+    assert stop.total == pytest.approx(0.1) and stop.position(1.05)[0] == pytest.approx(47.5 + 2.5 - 0.625)
+    assert stop.speed(1.05) == pytest.approx(25.0) and stop.done(1.1) and not stop.done(1.09)
 
 
-def test_emulated_grbl_motion_time_limits_and_hold():
-    with EmulatedGrbl(time_scale=10.0, settings={110: 3000, 111: 3000, 120: 500, 121: 500}) as emu:
+def test_emulated_grbl_motion_time_feed_hold_and_resume():
+    settings = {110: 3000, 111: 3000, 120: 500, 121: 500, 130: 320, 131: 320}
+    with EmulatedGrbl(time_scale=10.0, settings=settings) as emu:
         g = Grbl(emu.port, poll_s=0.005)
-        g.connect()
+        g.prepare()
         t0 = time.monotonic()
-        st = g.move_to(100.0, 0.0, feed_mm_min=3000)
+        pos = g.move_to(100.0, 0.0, feed_mm_min=3000)
         took = (time.monotonic() - t0) * 10.0                  # in emulated seconds
-        expect = _profile(100.0, 50.0, 500.0)[0]
-        assert st.mpos == (100.0, 0.0, 0.0) and expect * 0.95 < took < expect + 2.0   # + polling under load
+        expect = trapezoid(100.0, 50.0, 500.0)[0]
+        assert pos.xy_mm == (100.0, 0.0) and expect * 0.95 < took < expect + 2.0   # + polling under load
         g.move_to(300.0, 0.0, feed_mm_min=3000, wait=False)
-        time.sleep(0.05)                                       # 0.5 emulated s into a 4.1 s move
+        time.sleep(0.1)                                        # 1 emulated s into a 4.1 s move
         g.feed_hold()
-        time.sleep(0.02)
+        first = g.status()
+        assert first.state == "Hold" and first.substate == "1"  # decelerating
+        time.sleep(0.05)
         held = g.status()
         time.sleep(0.05)
-        assert held.state == "Hold" and g.status().mpos == held.mpos and 100 < held.mpos[0] < 300
+        assert held.substate == "0" and g.status().mpos == held.mpos and 100 < held.mpos[0] < 300
+        assert held.mpos[0] - first.mpos[0] < 50 ** 2 / (2 * 500) + 1e-3   # stopped within the braking distance
         g.resume()
         assert g.wait_idle(timeout=5).mpos[0] == 300.0
-        g.limits_mm = ((0, 1000), (0, 1000))                  # the driver's check off: GRBL's soft limit trips
-        with pytest.raises(GrblAlarm, match="ALARM:2"):
-            g.move_to(500.0, 0.0)
-        g.unlock()
-        assert g.status().state == "Idle"
         g.close()
 
 
-def test_emulated_grbl_homing_lock():
-    with EmulatedGrbl(time_scale=50.0, settings={22: 1}) as emu:
+def test_emulated_grbl_homing_with_and_without_a_z_switch():
+    with EmulatedGrbl(time_scale=50.0, settings={22: 1, 20: 1, 130: 320, 131: 320}) as emu:
         g = Grbl(emu.port)
-        g.connect()
-        assert g.alarm == -1 and g.status().state == "Alarm"
-        assert g.home().mpos == (0.0, 0.0, 0.0) and g.alarm is None
+        g.prepare(home=True)   # the power-up lock is cleared by homing: MPos = -pull-off on every axis
+        assert g.status().mpos == (-1.0, -1.0, -1.0) and g.alarm is None
+        assert g.where().xy_mm == (319.0, 319.0)   # G54 = (-320, -320)
+        g.close()
+    with EmulatedGrbl(time_scale=500.0, settings={22: 1}, switches="XY") as emu:
+        g = Grbl(emu.port)
+        with pytest.raises(GrblAlarm, match=r"ALARM:9 .*stopped after Z moved, before X or Y moved: stock GRBL homes "
+                                            r"Z first"):
+            g.prepare(home=True)
+        assert g.status().state == "Alarm" and g.banner.startswith("Grbl 1.1h")   # it reset itself
         g.close()
 
 
@@ -86,3 +98,20 @@ def test_lights():
     e.set(True)
     e.set(False)
     assert e.changes == 2 and e.state is False
+
+
+def test_a_sensor_port_with_text_but_no_histograms_is_named():
+    from rig_ports import ChattyPort
+
+    from nlosplan.hardware.tmf8828 import SensorGarbage
+
+    with ChattyPort() as port:
+        lidar = TMF8828(port.port, quiet_s=0.05)
+        lidar.garbage_s = 1.0
+        lidar.start("3x3", "short")          # every command is answered (with text)
+        t0 = time.monotonic()
+        with pytest.raises(SensorGarbage, match=r"lines in 1.\d s, none of them histogram data \(e.g. "
+                                                r"'temperature,21.5"):
+            lidar.read_frame(timeout=10.0, fresh=True)
+        assert time.monotonic() - t0 < 2.0
+        lidar.close()

@@ -37,10 +37,16 @@ def captures():
     return load_distance_captures(path), json.loads(path.read_text())
 
 
+def _meas_3x3():
+    """The MEAS values (single-zone time base, pulse and photon scale) on the 3x3 geometry, as the 8x8/4x4 presets carry them."""
+    return preset("tmf8828-8x8-short").replace(zones_rows=3, zones_cols=3, fov_x_deg=33.0, fov_y_deg=32.0,
+                                               iterations=550_000)
+
+
 def test_preset_time_base_matches_a_fresh_fit(captures):
     caps, _ = captures
     tb = fit_timebase(caps)
-    s = preset("tmf8828-3x3-short")
+    s = preset("tmf8828-8x8-short")
     assert s.bin_width_ps == pytest.approx(tb.bin_width_ps, abs=0.01)
     assert s.start_offset_ps == pytest.approx(tb.start_offset_ps, abs=0.1)
 
@@ -61,7 +67,7 @@ def test_preset_places_the_wall_return_at_the_measured_peak(captures):
 
 def test_photon_scale_and_background_reproduce_the_data(captures):
     caps, _ = captures
-    s = preset("tmf8828-3x3-short")
+    s = _meas_3x3()
     ratios, floors = [], []
     for d, h in zip(caps.distance_m, caps.hists):
         if d < 0.25:
@@ -73,3 +79,13 @@ def test_photon_scale_and_background_reproduce_the_data(captures):
     assert np.median(ratios) == pytest.approx(s.photon_scale, rel=0.1)
     assert np.median(floors) == pytest.approx(s.ambient_rate_hz + s.dark_rate_hz, rel=0.15)
     assert MEASURED["n_captures"] == 69
+
+
+def test_only_the_3x3_preset_carries_the_plane_units_per_zone_values():
+    s = preset("tmf8828-3x3-short")
+    assert s.pileup and s.zone_gains is not None and s.zone_time_offsets_ps is not None
+    assert "never take them as facts" in s.notes and "4000 kilo-iterations" in s.notes
+    for name in PRESET_NAMES:
+        if name != "tmf8828-3x3-short":
+            other = preset(name)
+            assert other.zone_gains is None and other.zone_time_offsets_ps is None and other.zone_overlap_m is None

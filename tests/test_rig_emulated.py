@@ -32,7 +32,10 @@ def test_ten_position_raster_with_three_repeats_lands_thirty_captures(tmp_path):
         for c in caps:
             m = c.meta
             assert m["run_id"] == "r1" and m["commanded_mm"] == pytest.approx(list(grid_mm(c.labels["position"])))
-            assert m["reported_mm"] == pytest.approx(m["commanded_mm"], abs=1e-3)
+            # reported in the same (user) frame as commanded, on GRBL's step grid (250 steps/mm: 0.004 mm)
+            step = m["gantry"]["step_mm"][0]
+            assert step == pytest.approx(0.004) and m["reported_mm"] == pytest.approx(m["commanded_mm"], abs=step)
+            assert m["gantry_raw"]["mpos_mm"][:2] == pytest.approx(m["reported_mm"], abs=1e-9)   # work offset 0
             # DENALI's sequence; a toggle may be pressed again after a reconnect to a firmware that kept its state
             assert "".join(dict.fromkeys(m["sensor"]["sequence"])) == "hdoEOzm" and m["sensor"]["zones"] == "3x3"
             assert m["gantry"]["banner"].startswith("Grbl 1.1h") and m["lights"] == "off"
@@ -148,3 +151,21 @@ def test_read_positions_formats_and_errors(tmp_path):
         read_positions(tmp_path / "bad.csv")
     with pytest.raises(UserError, match="does not exist"):
         read_positions(tmp_path / "none.csv")
+
+
+def test_planner_sees_reported_positions_in_its_own_frame_under_a_work_offset(tmp_path):
+    """Homing and soft limits on: GRBL's space is [-320, 0], G54 = (-320, -320). What the executor hands the
+    ask/tell planner (and stores) is the user-frame position, not the machine position (-320 mm away)."""
+    told = []
+    queue = [[(17.5, 203.25), (250.0, 40.0)], []]
+    settings = {22: 1, 20: 1}
+    with emulated_rig(time_scale=50, gantry_settings=settings, unlock=True) as rig, \
+            CaptureStore(tmp_path / "r.db") as store:
+        assert rig.gantry.frame.offset_mm == (-320.0, -320.0) and rig.gantry.frame.soft_limits
+        Executor(rig, store, run_id="wo", context=CTX).run(
+            ask_tell_plan(lambda n: queue.pop(0), told.extend, batch=2, repeats=1, settle_s=0.0))
+        for (x, y), results in told:
+            assert results[0].reported_mm == pytest.approx((x, y), abs=0.004)
+        for cap in store.iter_captures():
+            mx, my, _ = cap.meta["gantry_raw"]["mpos_mm"]
+            assert (mx, my) == pytest.approx((cap.meta["reported_mm"][0] - 320, cap.meta["reported_mm"][1] - 320))

@@ -7,6 +7,7 @@ from nlosplan.hardware.executor import Executor, RunContext
 from nlosplan.hardware.grbl import GrblAlarm
 from nlosplan.hardware.plans import raster_plan
 from nlosplan.hardware.rig import emulated_rig
+from nlosplan.hardware.transport import DeviceTimeout
 from nlosplan.data.store import CaptureStore
 
 CTX = RunContext("A", "8in", source="emulated:rig", plan="faults")
@@ -61,9 +62,16 @@ def test_gantry_alarm_mid_move_then_resume_after_unlock(tmp_path):
         ex = Executor(rig, store, run_id="run", context=CTX)
         with pytest.raises(GrblAlarm, match=r"moving to \(71.111, 0.000\) mm: ALARM:1 \(hard limit"):
             ex.run(_plan())
-        assert ex.summary.captured == 4 and "gantry in alarm: not parked" in ex.summary.finalize[-1]
+        assert ex.summary.captured == 4
+        assert ex.summary.finalize[-1] == "gantry in alarm (ALARM:1): not parked, last reported at (35.556, 0.000) mm"
         _check_once(store, 4)
-        rig.gantry.unlock()   # the user's decision (--unlock), never the driver's own
+        # GRBL after ALARM:1 answers nothing, status requests and $X included, until a soft reset
+        with pytest.raises(DeviceTimeout, match="answers nothing after ALARM:1/2 until a soft reset"):
+            rig.gantry.status(timeout=0.5)
+        with pytest.raises(DeviceTimeout, match="no 'ok' for '\\$X'"):
+            rig.gantry.send("$X", timeout=0.5)
+        rig.gantry.recover(unlock=True)   # the user's decision (--unlock), never the driver's own: reset, then $X
+        assert rig.gantry.blocked() is None and rig.gantry.status().state == "Idle"
         s = Executor(rig, store, run_id="run", context=CTX).run(_plan())
         assert (s.resumed, s.captured) == (4, 4)
         _check_once(store, 8)

@@ -11,7 +11,7 @@ from nlosplan.simulators import WallScene, simulate_wall, wall_arrivals
 
 def ideal(**kw):
     base = dict(pulse_shape=None, pulse_fwhm_ps=0.0, saturation=False, ambient_rate_hz=0.0, dark_rate_hz=0.0)
-    return preset("tmf8828-3x3-short").replace(**{**base, **kw})
+    return preset("tmf8828-3x3-short").linear_uniform().replace(**{**base, **kw})
 
 
 @pytest.mark.parametrize("d", [0.2, 0.49, 0.9])

@@ -33,6 +33,7 @@ ROOMS: tuple[str, ...] = (
     "evaluate",
     "calibrate",
     "rig",
+    "serve",
 )
 
 
@@ -62,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as exc:
         print(f"nlosplan: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("nlosplan: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:   # a rig run says where it stopped and what finalize did
+        print(f"nlosplan: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early
         import os

@@ -6,13 +6,16 @@ import argparse
 import time
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, note, progress_bar
+from nlosplan.cli.calibrate_plane import zone_list
+from nlosplan.cli.common import emit, int_type, note, number_type, progress_bar, seed_type
 from nlosplan.errors import UserError
 
 EXAMPLES = (
-    "nlosplan calibrate ../shared/data/tmf882x_distance/distance_data_even.json --holdout 0.5 "
-    "--out out/calibrated.toml --plot out/calibration.png",
-    "nlosplan calibrate captures.json --steps scale,pulse --pulse gaussian --start bin_width_ps=95 --json",
+    "nlosplan calibrate ../shared/data/tmf882x_distance/distance_data_even.json --out out/calibrated.toml "
+    "--plot out/calibration.png",
+    "nlosplan calibrate --score ../shared/data/tmf882x_distance/distance_data_even.json --sensor out/calibrated.toml",
+    "nlosplan calibrate captures.json --terms offsets,gains,pileup --folds 4 --json",
+    "nlosplan calibrate captures.json --model global --holdout 0.5 --steps scale,pulse --pulse gaussian --json",
     "nlosplan calibrate denali-data/data --where zones=3x3,lights=off --holdout 0.3 --out out/denali3x3.toml",
     "nlosplan calibrate out/denali.sqlite --where 'zones=8x8,object=NOOBJECT|A' --sensor tmf8828-8x8-short --json",
 )
@@ -42,8 +45,22 @@ gantry positions, and measure each zone's floor on the bins no simulated light
 reaches, over the captures of one folder (the object's return may fall in the
 last bins).
 
-Fitted with nlopt (BOBYQA) on normalized, bounded variables by Poisson maximum
-likelihood: global photon scale, pulse width (a Gaussian broadening a
+Plane captures (JSON), default model 'zones': every zone is fitted by
+Poisson maximum likelihood (L-BFGS with exact JAX gradients on normalized,
+bounded variables) with the terms the real plane data asks for (--terms):
+per-zone time offsets and time scales (TDC delay and rate), per-zone gains,
+per-zone near-field overlap r^2/(r^2+d0^2), pile-up (first photon per zone;
+the captures' iterations are fitted from it), an exponential pulse tail after
+32 free pulse samples; the floor of each capture zone is measured on its bins
+before any return (the room light on the plane). --folds K cross-validates by
+distance: each capture is predicted by the sensor file of a fit that did not
+see it, and the per-zone table (sub-bin peak error, L1 of the shape, amplitude
+ratio) is printed against the targets; the K refits give jackknife errors.
+About 1 min per fit on 2 idle cores (5 folds: 5-6 min). --score DATA --sensor
+FILE prints that table for any sensor file without fitting anything.
+
+Model 'global' and DENALI inputs: fitted with nlopt (BOBYQA) on normalized,
+bounded variables by Poisson maximum likelihood: global photon scale, pulse width (a Gaussian broadening a
 non-parametric pulse shape, or a Gaussian alone), bin width and time offset,
 noise floor, crosstalk peak. DENALI's three calibration functions are steps
 that stack: scale (global scaling), pulse (pulse-width and time-base
@@ -72,16 +89,6 @@ def _parse_start(text: str | None) -> dict:
         if not sep or not key.strip():
             raise UserError(f"--start {text!r}: give NAME=VALUE pairs, e.g. bin_width_ps=95,start_offset_ps=-1100")
     return out
-
-
-def _zones(text: str, n: int) -> list[int]:
-    try:
-        zones = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        zones = []
-    if not zones or any(not 0 <= z < n for z in zones):
-        raise UserError(f"--zones {text!r} must be flat zone indices 0..{n - 1} separated by commas, e.g. 4")
-    return zones
 
 
 def _steps(text: str) -> list[str]:
@@ -144,15 +151,37 @@ def _cmd_calibrate(args) -> int:
     from nlosplan.calibration.bootstrap import MIN_RESAMPLES
     from nlosplan.calibration.denali_data import is_capture_store
 
+    from nlosplan.cli import calibrate_plane
+
     t0 = time.perf_counter()
+    if args.score:
+        return calibrate_plane.run_score(args, t0)
+    from nlosplan.files import check_output_file, check_plot_path
+
+    if args.out:  # before the fit (minutes), not after it
+        check_output_file(args.out, "--out", suffixes=(".toml", ".json"))
+    if args.plot:
+        check_plot_path(args.plot)
+    if not args.captures:
+        raise UserError("give CAPTURES to fit, or --score DATA --sensor FILE to score a sensor without fitting")
     if 0 < args.bootstrap < MIN_RESAMPLES:  # before the fit, not after it
         raise UserError(f"bootstrap resamples {args.bootstrap} < {MIN_RESAMPLES}: give at least {MIN_RESAMPLES} "
                         "(30 or more for a 95 % interval)")
     if Path(args.captures).is_dir() or is_capture_store(args.captures):
+        for flag, value in (("--model", args.model), ("--terms", args.terms), ("--folds", args.folds)):
+            if value is not None:
+                raise UserError(f"{flag} applies to JSON plane captures, not to a DENALI folder or a capture store")
         return _calibrate_denali(args, t0)
     for flag, value in (("--where", args.where), ("--fidelity", args.fidelity), ("--trust-pickle", args.trust_pickle)):
         if value not in (None, False):
             raise UserError(f"{flag} applies to a DENALI folder or a capture store, not to JSON plane captures")
+    if (args.model or "zones") == "zones":
+        if args.folds is None:
+            args.folds = 5
+        return calibrate_plane.run_zones(args, t0)
+    for flag, value in (("--terms", args.terms), ("--folds", args.folds)):
+        if value is not None:
+            raise UserError(f"{flag} applies to --model zones (the all-zone model), not to --model global")
     return _calibrate_plane(args, t0)
 
 
@@ -166,7 +195,7 @@ def _calibrate_plane(args, t0: float) -> int:
     args.lights = args.lights or "on"
     args.min_distance = 0.06 if args.min_distance is None else args.min_distance
     captures, base = load_plane(args.captures, args.sensor)
-    zones = _zones(args.zones, captures.hists.shape[1])
+    zones = zone_list(args.zones, captures.hists.shape[1])
     steps = _steps(args.steps)
     if not 0 <= args.holdout < 1:
         raise UserError(f"--holdout {args.holdout} must be >= 0 and < 1 (the held-out fraction)")
@@ -212,7 +241,7 @@ def _calibrate_denali(args, t0: float) -> int:
     fidelity = args.fidelity or "default"
     caps, base = load_denali(args.captures, parse_where(args.where), sensor=args.sensor,
                              trust_pickle=args.trust_pickle, fidelity=fidelity, noise=args.noise)
-    zones = _zones(args.zones, base.n_zones) if args.zones else None
+    zones = zone_list(args.zones, base.n_zones) if args.zones else None
     where = "DENALI folder" if Path(args.captures).is_dir() else "capture store"
     cal = calibrate_denali(
         caps, base, steps=steps, zones=zones, pulse=args.pulse, noise=args.noise, start=start,
@@ -247,8 +276,19 @@ def add(sub) -> None:
     p = sub.add_parser("calibrate", help="fit the sensor model to real captures of known geometry (sim-to-real)",
                        description=DESCRIPTION, epilog="examples:\n" + "\n".join(f"  {e}" for e in EXAMPLES),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("captures", help="JSON captures of a plane at known distances (tmf882x_distance layout), a "
-                                    "DENALI-layout folder, or a capture store (.sqlite)")
+    p.add_argument("captures", nargs="?", help="JSON captures of a plane at known distances (tmf882x_distance "
+                                               "layout), a DENALI-layout folder, or a capture store (.sqlite)")
+    p.add_argument("--score", metavar="DATA",
+                   help="score --sensor on DATA without fitting anything: the per-zone table (plane captures so far)")
+    p.add_argument("--model", choices=["zones", "global"],
+                   help="JSON plane captures: 'zones' fits every zone with the per-zone terms, amplitude law, pile-up "
+                        "and pulse tail; 'global' the single-zone model with one photon scale (zone 4 by default) "
+                        "(default: zones)")
+    p.add_argument("--terms", metavar="T,...",
+                   help="--model zones: physics terms to fit, from offsets, scales, gains, overlap, pileup, tail "
+                        "(default: all; leave some out for an ablation)")
+    p.add_argument("--folds", type=int_type(0, 1000), metavar="K",
+                   help="--model zones: cross-validate by distance with K folds, 0 for none (default: 5)")
     p.add_argument("--sensor", help="sensor to calibrate: preset or file (default: tmf8828-3x3-short for JSON; "
                                     "the captures' stored sensor for a DENALI folder or a store)")
     p.add_argument("--steps", default="scale,pulse,noise",
@@ -261,15 +301,16 @@ def add(sub) -> None:
                    help="noise floor: each capture zone's own (JSON: median of its last 30 bins; DENALI: mean of "
                         "the bins no simulated light reaches, per folder) or one fitted level (default: measured)")
     p.add_argument("--zones", help="flat zone indices to fit, e.g. 4 (centre of 3x3) or 0,1,2,3,4 "
-                                   "(default: 4 for JSON; every zone that sees the relay wall for DENALI)")
-    p.add_argument("--min-distance", type=float,
-                   help="JSON only: leave out captures closer than this, metres (near field, crosstalk overlap; "
-                        "default: 0.06)")
+                                   "(default: every zone for JSON with --model zones, 4 with --model global; every "
+                                   "zone that sees the relay wall for DENALI)")
+    p.add_argument("--min-distance", type=number_type(float, zero_ok=True),
+                   help="JSON only: leave out captures closer than this, metres, from the fit and the scores "
+                        "(default: 0.06)")
     p.add_argument("--start", metavar="NAME=V,...", help="start values, e.g. bin_width_ps=95,start_offset_ps=-1100 "
                                                         "(default: from leading edges and sums of the data)")
     p.add_argument("--holdout", type=float, default=0.0,
                    help="fraction of captures kept out of the fit and scored (default: 0, fit on all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the holdout split and the bootstrap (default: 0)")
+    p.add_argument("--seed", type=seed_type(), default=0, help="seed of the holdout split and the bootstrap (default: 0)")
     p.add_argument("--bootstrap", type=int_type(0, 1000), default=0, metavar="N",
                    help="also refit on N resamples of the fitted captures (with replacement) and report the spread: "
                         "uncertainties that include model error, unlike Fisher's; 1-4 s per refit (default: off)")

@@ -132,6 +132,11 @@ EXAMPLES = {
         "nlosplan design --quick --out out/d --overwrite        # start over where out/d holds a previous run",
         "nlosplan design --config my_space.toml --cluster local:4",
     ),
+    "serve": (
+        "nlosplan serve nlosplan-out/design                # the design page (a run in progress or finished)",
+        "nlosplan serve runs.db --planner nlosplan-out/rig-run   # the rig page; approve batches of 'rig run --approve'",
+        "nlosplan serve archive/denali.sqlite --host 0.0.0.0 --read-only --port 8060",
+    ),
     "sensor list": "nlosplan sensor list",
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
     "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",

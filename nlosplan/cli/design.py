@@ -84,6 +84,7 @@ def build_config(args):
 def _cmd_design(args) -> int:
     from pathlib import Path
 
+    from nlosplan.cli.live import live_page
     from nlosplan.files import check_output_dir, write_json, writing
     from nlosplan.planner.design.run import run_design
     from nlosplan.reports.design_report import minimum_hardware_text, write_design_report
@@ -94,7 +95,7 @@ def _cmd_design(args) -> int:
         raise UserError("--overwrite and --resume exclude each other: continue the run or start over")
     cfg = build_config(args)
     check_output_dir(args.out)
-    with progress_bar(args, None, "design", "evaluation") as bar:
+    with live_page(args, "design", args.out), progress_bar(args, None, "design", "evaluation") as bar:
         def progress(text, done, total):
             stage, _, detail = text.partition(": ")
             if stage in ("checkpoint",):
@@ -164,6 +165,9 @@ def add(sub) -> None:
     real.add_argument("--capture-sensor", metavar="NAME|FILE", help="preset or sensor file of the real captures "
                                                                     "(default: the space's reference)")
     p.add_argument("--json", action="store_true", help="print the JSON summary (see above)")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(p, "the run (stage, progress, the answer so far, trade-off plots)")
     p.set_defaults(func=_cmd_design)
 
 

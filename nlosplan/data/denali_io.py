@@ -35,7 +35,12 @@ from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.denali import DENALI_OBJECTS, class_group
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
-__all__ = ["BACKGROUNDS", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
+__all__ = ["BACKGROUNDS", "NoCaptureFiles", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
+
+
+class NoCaptureFiles(UserError):
+    """A folder given to :func:`import_denali` holds no capture file (nothing is stored)."""
+
 
 #: ``source`` label of imported captures.
 SOURCE = "real:denali"
@@ -236,7 +241,7 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
     work, skipped = _scan(root, positions, by_zones, trust_pickle)
     if not work:
         why = f"; {len(skipped)} entries skipped, e.g. {skipped[0]['path']}: {skipped[0]['reason']}" if skipped else ""
-        raise UserError(f"no capture files to import in {root} (expected <object>_<4inch|8inch>_<3x3|8x8>_"
+        raise NoCaptureFiles(f"no capture files to import in {root} (expected <object>_<4inch|8inch>_<3x3|8x8>_"
                         f"<lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy){why}")
     owned = not isinstance(store, CaptureStore)
     if owned:

@@ -105,7 +105,7 @@ def prepare_world(study: ActiveStudy):
     from nlosplan.sensor_models import preset
 
     t0 = time.perf_counter()
-    sensor = preset(study.sensor)
+    sensor = preset(study.sensor).linear_uniform()  # the capture planner's counts model is linear, zone-uniform
     scene_fn = denali_scene_fn(study.obj, study.size, "off")
     cand = screen_candidates(grid_points(study.grid, study.grid), scene_fn=scene_fn, sensor=sensor)
     space = build_space(cand.points_mm, sensor, scene_fn=scene_fn, fidelity=study.fidelity, repeats=study.repeats,

@@ -16,7 +16,8 @@ against a :class:`~nlosplan.hardware.rig.Rig` and a
   differs from the plan's is refused (a different plan under the same run id).
 - Every capture is committed in one transaction, with its metadata: run id,
   step, plan, sensor and firmware configuration, commanded and reported
-  position, timestamps, lights, repeat, frame counters.
+  position, timestamps, lights, repeat, frame counters, and the run's frame
+  retries and sensor reconnects so far (``run_faults``; what the live page shows).
 - A failed frame read (timeout, garbled link, unplug) reconnects the sensor
   and retries (``retries`` times); gantry errors and alarms end the run.
 - Errors are thrown into the plan (so :func:`~nlosplan.hardware.plans.finalize_wrapper`
@@ -297,7 +298,7 @@ class Executor:
                 time.sleep(self._settle)
 
     def _take(self, cmd: Capture, step: int, labels: dict, key: str) -> CaptureResult:
-        from nlosplan.hardware.tmf8828 import SensorError
+        from nlosplan.hardware.tmf8828 import SensorError, SensorGarbage
 
         rig = self.rig
         self._bring_to_target()
@@ -307,24 +308,27 @@ class Executor:
             try:
                 frame = rig.sensor.read_frame(fresh=True)
                 break
+            except SensorGarbage:
+                raise   # what is on the port does not change by reconnecting
             except (SensorError, ConnectionLost, DeviceTimeout) as exc:
                 if attempt == self.retries:
                     raise SensorError(f"no frame at step {step} after {self.retries} retries: {exc}") from None
                 self.summary.retries += 1
                 rig.sensor.reconnect()
                 self.summary.reconnects += 1
-        status = rig.gantry.status()
-        reported = [round(v, 4) for v in status.position[:2]]
+        pos = rig.gantry.where()
+        reported = [round(v, 4) for v in pos.xy_mm]
         meta = {
             "run_id": self.run_id, "step": step, "plan": self.ctx.plan, "plan_total": self.ctx.plan_total,
-            "commanded_mm": list(self._target), "reported_mm": reported, "gantry_state": status.state,
-            "settle_s": self._settle, "repeat": cmd.repeat, "lights": labels["lights"],
+            "commanded_mm": list(self._target), "reported_mm": reported, "gantry_raw": pos.raw,
+            "gantry_state": pos.state, "settle_s": self._settle, "repeat": cmd.repeat, "lights": labels["lights"],
             "t_capture_start_utc": t_start, "t_capture_end_utc": _utc(),
             "sensor": {"port": rig.sensor.port_name, **rig.sensor.firmware_config()},
-            "gantry": {"port": rig.gantry.port_name, "banner": rig.gantry.banner, "feed_mm_min": rig.feed_mm_min,
-                       "limits_mm": [list(v) for v in rig.gantry.limits_mm]},
+            "gantry": {**rig.gantry.describe(), "feed_mm_min": rig.feed_mm_min},
             "frame": {"results": [o.to_dict() for o in frame.results], "assembler": rig.sensor.stats},
-            "emulated": rig.emulated, **cmd.meta,
+            "emulated": list(rig.emulated), "run_faults": {"retries": self.summary.retries,
+                                                           "reconnects": self.summary.reconnects},
+            **cmd.meta,
         }
         if step == 0 and self.ctx.plan_spec is not None:
             meta["plan_spec"] = self.ctx.plan_spec
@@ -334,6 +338,7 @@ class Executor:
 
     # ------------------------------------------------------------------ finalize
     def _finalize(self) -> None:
+        """Stop the sensor, park the gantry (not when it is blocked); every outcome is noted, with where it is."""
         notes = self.summary.finalize
         try:
             self.rig.sensor.stop()
@@ -341,16 +346,25 @@ class Executor:
         except Exception as exc:  # noqa: BLE001 - finalize must go on to the gantry
             notes.append(f"sensor stop failed: {exc}")
         park = self.rig.park_mm
-        if park is None:
+        gantry = self.rig.gantry
+        blocked = gantry.blocked()
+        if blocked is not None:
+            notes.append(f"gantry {blocked}: not parked, last reported at {_at(gantry.last_xy)}")
             return
-        if self.rig.gantry.alarm is not None:
-            notes.append("gantry in alarm: not parked (clear it with $X or $H, then resume the run)")
+        if park is None:
+            notes.append(f"gantry left at {_at(gantry.last_xy)} (no parking)")
             return
         try:
-            self.rig.gantry.move_to(*park, feed_mm_min=self.rig.feed_mm_min)
+            pos = gantry.move_to(*park, feed_mm_min=self.rig.feed_mm_min)
             notes.append(f"gantry parked at ({park[0]:g}, {park[1]:g}) mm")
+            if pos is not None and max(abs(a - b) for a, b in zip(pos.xy_mm, park)) > 0.01:
+                notes.append(f"gantry reports {_at(pos.xy_mm)}")
         except BaseException as exc:  # noqa: BLE001 - reported, the run's own error goes on
-            notes.append(f"gantry not parked: {exc}")
+            notes.append(f"gantry not parked: {exc}; last reported at {_at(gantry.last_xy)}")
+
+
+def _at(xy) -> str:
+    return "an unknown position" if xy is None else f"({xy[0]:.3f}, {xy[1]:.3f}) mm"
 
 
 def _xy(labels: dict):

@@ -1,41 +1,43 @@
-"""GRBL 1.1 gantry driver over pyserial (an XY gantry on a CNC shield).
+"""GRBL 1.1 gantry driver over pyserial (an XY gantry on a CNC shield), by the real firmware's rules.
 
 Send-and-wait (every line waits for its ``ok``) for commands, character
 counting (GRBL's 128-byte receive buffer) for :meth:`Grbl.stream`, ``?``
-status polling to wait for Idle, soft limits checked here before anything is
-sent, ``ALARM:``/``error:`` raised as :class:`GrblAlarm`/:class:`GrblError`.
-The driver never unlocks (``$X``) by itself: :meth:`Grbl.unlock` does, when asked.
+status polling to wait for Idle, ``ALARM:``/``error:`` raised as
+:class:`GrblAlarm`/:class:`GrblError`. :meth:`Grbl.prepare` finds GRBL on
+the port (:func:`~nlosplan.hardware.gantry.probe_firmware`), reads ``$$``,
+``$I`` and ``$#``, clears an alarm only when asked (soft reset first after
+ALARM:1/2, as GRBL requires; then ``$H`` or ``$X``), and sets and checks
+the work offset that makes the plan's coordinates GRBL's work coordinates
+(:mod:`~nlosplan.hardware.grbl_frame`). Positions come back in that user
+frame, with the raw machine position for audit.
 
 Examples
 --------
 >>> with Grbl("/dev/ttyUSB0", limits_mm=((0, 320), (0, 320))) as gantry:   # doctest: +SKIP
-...     gantry.connect()
-...     status = gantry.move_to(35.6, 0.0, feed_mm_min=3000)   # waits for Idle
-...     status.mpos
-(35.6, 0.0, 0.0)
+...     gantry.prepare(home=True)
+...     gantry.move_to(35.556, 0.0, feed_mm_min=3000).xy_mm   # waits for Idle
+(35.556, 0.0)
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections import deque
 
 from nlosplan.errors import UserError
-from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError, Status, parse_status
-from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, LineReader, open_serial
+from nlosplan.hardware.gantry import GantryPosition, LimitError, WrongFirmware, check_box, probe_firmware
+from nlosplan.hardware.grbl_frame import TOL_MM, FrameChanged, WorkFrame, parse_work_offset, plan_frame
+from nlosplan.hardware.grbl_homing import homing_diagnosis
+from nlosplan.hardware.grbl_link import RX_BUFFER, GrblLink
+from nlosplan.hardware.grbl_protocol import (CRITICAL_ALARMS, GrblAlarm, GrblError, Status, parse_build_info,
+                                             parse_ngc_parameters, parse_settings)
+from nlosplan.hardware.transport import DeviceTimeout
 
-__all__ = ["Grbl", "GrblAlarm", "GrblError", "LimitError", "Status"]
-
-RX_BUFFER = 128
+__all__ = ["RX_BUFFER", "Grbl", "GrblAlarm", "GrblError", "LimitError", "Status"]
 
 
-class LimitError(UserError):
-    """A move target outside the gantry's soft limits (refused before anything is sent)."""
-
-
-class Grbl:
-    """A GRBL 1.1 controller.
+class Grbl(GrblLink):
+    """A GRBL 1.1 controller driving the gantry in the user frame.
 
     Parameters
     ----------
@@ -43,302 +45,227 @@ class Grbl:
     baudrate : int
         115200 for GRBL 1.1.
     limits_mm : ((xmin, xmax), (ymin, ymax))
-        Soft limits checked before every move (mm, machine frame).
+        Limits in the user frame, checked before every move (mm).
     feed_mm_min : float
         Default feed rate of moves (mm/min).
-    timeout : float
-        Seconds to wait for an answer to one line.
-    poll_s : float
-        Status polling period while waiting for Idle.
-    move_timeout : float
-        Seconds a move may take before :meth:`wait_idle` gives up.
+    work_offset : "auto", "keep" or (x, y)
+        How the user frame maps onto GRBL's machine space (:mod:`~nlosplan.hardware.grbl_frame`).
+    timeout, poll_s, move_timeout : float
+        See :class:`~nlosplan.hardware.grbl_link.GrblLink`.
     """
 
+    kind = "grbl"
+
     def __init__(self, port, *, baudrate: int = 115200, limits_mm=((0.0, 320.0), (0.0, 320.0)),
-                 feed_mm_min: float = 3000.0, timeout: float = 5.0, poll_s: float = 0.05,
+                 feed_mm_min: float = 3000.0, work_offset="auto", timeout: float = 5.0, poll_s: float = 0.05,
                  move_timeout: float = 120.0) -> None:
         (x0, x1), (y0, y1) = limits_mm
-        if not (x0 < x1 and y0 < y1) or not all(math.isfinite(v) for v in (x0, x1, y0, y1)):
+        if not all(math.isfinite(v) for v in (x0, x1, y0, y1)) or not (x0 < x1 and y0 < y1):
             raise UserError(f"gantry limits {limits_mm!r} must be finite (min, max) pairs with min < max")
         if not (math.isfinite(feed_mm_min) and feed_mm_min > 0):
             raise UserError(f"feed rate {feed_mm_min!r} mm/min must be > 0")
+        work_offset = parse_work_offset(work_offset)
+        super().__init__(port, baudrate, timeout=timeout, poll_s=poll_s, move_timeout=move_timeout)
         self.limits_mm = ((float(x0), float(x1)), (float(y0), float(y1)))
         self.feed_mm_min = float(feed_mm_min)
-        self.timeout, self.poll_s, self.move_timeout = timeout, poll_s, move_timeout
-        self.repoll_s = 0.5   # ask again for a status report not answered within this
-        self.port_name = port if isinstance(port, str) else getattr(port, "port", None) or repr(port)
-        self._ser, self._owned = open_serial(port, baudrate)
-        self._reader = LineReader(self._ser)
-        self.banner: str | None = None
-        self.messages: list[str] = []
-        self.last_status: Status | None = None
-        self._wco: tuple | None = None
-        self.alarm: int | None = None
-
-    # ------------------------------------------------------------------ low level
-    def _write(self, data: bytes) -> None:
-        self._reader.write(data)
-
-    def _handle(self, line: str, context: str) -> str | None:
-        """Classify one incoming line; returns "ok", a status marker, or None (feedback)."""
-        s = line.strip()
-        if not s:
-            return None
-        if s == "ok":
-            return "ok"
-        if s.startswith("error:"):
-            return s
-        if s.startswith("ALARM:"):
-            try:
-                code = int(s[6:])
-            except ValueError:
-                code = 0
-            self.alarm = code
-            raise GrblAlarm(code, context)
-        if s.startswith("<"):
-            try:
-                self.last_status = parse_status(s, self._wco)
-            except ValueError:
-                return "bad status"
-            if "WCO:" in s:
-                self._wco = tuple(float(v) for v in s.split("WCO:")[1].split("|")[0].rstrip(">").split(","))
-            return "status"
-        if s.startswith("Grbl "):
-            self.banner = s
-            return "banner"
-        self.messages.append(s)
-        return None
-
-    def _wait_ok(self, line: str, timeout: float) -> list[str]:
-        out = []
-        deadline = time.monotonic() + timeout
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise DeviceTimeout(f"gantry on {self.port_name}: no 'ok' for {line!r} within {timeout:g} s")
-            try:
-                got = self._reader.readline(left)
-            except DeviceTimeout:
-                continue
-            kind = self._handle(got, f"after {line!r}")
-            if kind == "ok":
-                return out
-            if kind and kind.startswith("error:"):
-                try:
-                    code = int(kind[6:])
-                except ValueError:
-                    code = 0
-                raise GrblError(code, line)
-            if kind == "banner":
-                raise ConnectionLost(f"gantry on {self.port_name} reset while running {line!r}")
-            if kind is None and got.strip():
-                out.append(got.strip())
-
-    def send(self, line: str, timeout: float | None = None) -> list[str]:
-        """Send one line and wait for its ``ok`` (send-and-wait); returns the lines before it.
-
-        Raises
-        ------
-        GrblError, GrblAlarm, DeviceTimeout, ConnectionLost
-        """
-        line = line.strip()
-        if not line or "\n" in line or len(line) >= RX_BUFFER:
-            raise UserError(f"gantry line {line!r} must be one non-empty line under {RX_BUFFER} characters")
-        self._write((line + "\n").encode("ascii"))
-        return self._wait_ok(line, self.timeout if timeout is None else timeout)
-
-    def stream(self, lines, timeout: float | None = None) -> int:
-        """Send many lines by character counting (at most 128 bytes unacknowledged in GRBL's buffer).
-
-        Returns
-        -------
-        int
-            Lines sent (all acknowledged).
-        """
-        timeout = self.timeout if timeout is None else timeout
-        pending: deque[tuple[str, int]] = deque()
-        n = 0
-        for raw in lines:
-            line = raw.strip()
-            if not line:
-                continue
-            size = len(line) + 1
-            if size > RX_BUFFER:
-                raise UserError(f"gantry line {line!r} is longer than GRBL's {RX_BUFFER}-byte buffer")
-            while pending and sum(k for _, k in pending) + size > RX_BUFFER:
-                self._wait_ok(pending.popleft()[0], timeout)
-            self._write((line + "\n").encode("ascii"))
-            pending.append((line, size))
-            n += 1
-        while pending:
-            self._wait_ok(pending.popleft()[0], timeout)
-        return n
+        self.work_offset = work_offset
+        self.build = None
+        self.settings: dict[int, float] = {}
+        self.ngc: dict[str, tuple] = {}
+        self.frame: WorkFrame | None = None
+        self.connected_by = ""
+        self.last_xy: tuple | None = None
 
     # ------------------------------------------------------------------ session
     def connect(self, timeout: float = 5.0) -> str:
-        """Wake GRBL and read its banner (soft reset if it says nothing).
+        """Find GRBL on the port and learn its state and version.
+
+        A banner (the board reset when the port opened) or a status report (it
+        was running) is enough; when neither comes within half the timeout, a
+        soft reset is sent (a GRBL halted by ALARM:1/2 answers nothing else).
 
         Returns
         -------
         str
-            The banner, e.g. ``Grbl 1.1h ['$' for help]``.
+            How it answered: ``banner``, ``status`` or ``reset``.
 
         Raises
         ------
+        WrongFirmware
+            Telemetrix firmware, or bytes that are neither GRBL nor Telemetrix.
         DeviceTimeout
-            No banner (wrong port or baud rate, not GRBL).
+            Nothing at all (wrong port, or the controller is off).
         """
-        self._write(b"\r\n\r\n")
-        for attempt in range(2):
-            if self._await_banner(time.monotonic() + timeout / 2, "at connect"):
-                return self.banner
-            if attempt == 0:
-                self._write(b"\x18")
-        raise DeviceTimeout(f"no GRBL banner from {self.port_name} within {timeout:g} s "
-                            "(wrong port or baud rate, or not GRBL 1.1?)")
-
-    def _await_banner(self, deadline: float, context: str) -> bool:
-        """Read lines until a banner (then drain what follows it) or the deadline; alarms before it are skipped."""
-        while time.monotonic() < deadline:
-            try:
-                line = self._reader.readline(max(deadline - time.monotonic(), 0.01))
-            except DeviceTimeout:
-                return False
-            try:
-                if self._handle(line, context) == "banner":
-                    self._after_banner()
-                    return True
-            except GrblAlarm:
-                continue
-        return False
-
-    def _after_banner(self) -> None:
-        # drain the feedback that follows a banner ([MSG:'$H'|'$X' to unlock] when homing is enabled)
+        found = probe_firmware(self._ser, timeout=timeout, reset_after_s=timeout / 2, poll_s=self.repoll_s)
+        if found.kind == "telemetrix":
+            raise WrongFirmware(f"gantry on {self.port_name} runs Telemetrix4Arduino {found.text}, not GRBL: "
+                                "use --gantry-kind telemetrix (or auto)")
+        if found.kind is None:
+            if found.seen:
+                raise WrongFirmware(f"gantry on {self.port_name} answers, but not like GRBL 1.1 "
+                                    f"({found.describe_seen()}): wrong baud rate (GRBL uses 115200) or another "
+                                    "firmware on this port")
+            raise DeviceTimeout(f"no answer from a gantry on {self.port_name} within {timeout:g} s (not even to "
+                                "a soft reset): is this the gantry's port, and is the controller powered?")
+        self._reader.unread(found.rest)
+        if found.how in ("banner", "reset"):
+            self.banner = found.text
+        self.connected_by = found.how
+        # drain what follows ([MSG:'$H'|'$X' to unlock], a banner after an early status, answers to extra '?')
         try:
-            for line in self._reader.read_until_quiet(0.1, 0.3):
-                self._handle(line, "after reset")
+            for line in self._reader.read_until_quiet(0.15, 0.5):
+                self._handle(line, "at connect")
         except (DeviceTimeout, GrblAlarm):
             pass
-        self.alarm = None
-        st = self.status()
-        if st.state == "Alarm":
-            self.alarm = -1
+        st = self.status(context="at connect")
+        self.alarm = -1 if st.state == "Alarm" else None
+        if st.state in ("Run", "Jog", "Home"):
+            st = self.wait_idle(context="at connect (it was moving)")
+        elif st.state not in ("Idle", "Alarm"):
+            raise UserError(f"gantry on {self.port_name} is in state {st.raw}: resume (~) or reset it (its own "
+                            "controls) before nlosplan drives it")
+        self.build = parse_build_info(self.send("$I"))
+        version = self.build.version if self.build else (self.banner or "Grbl ?").split()[1]
+        if not str(version).startswith("1.1"):
+            raise WrongFirmware(f"gantry on {self.port_name} runs GRBL {version}; nlosplan speaks GRBL 1.1")
+        return found.how
 
-    def settings(self) -> dict[int, float]:
+    def read_setup(self) -> dict[int, float]:
+        """``$$`` and ``$#``: settings and stored offsets (``self.settings``, ``self.ngc``)."""
+        self.settings = parse_settings(self.send("$$"))
+        self.ngc = parse_ngc_parameters(self.send("$#"))
+        return self.settings
+
+    def settings_now(self) -> dict[int, float]:
         """``$$``: the settings as ``{number: value}``."""
-        out = {}
-        for line in self.send("$$"):
-            if line.startswith("$") and "=" in line:
-                k, _, v = line[1:].partition("=")
-                try:
-                    out[int(k)] = float(v.split()[0])
-                except ValueError:
-                    continue
-        return out
+        return parse_settings(self.send("$$"))
 
     def set_setting(self, number: int, value: float) -> None:
         """``$N=value`` (one at a time, as GRBL asks)."""
         self.send(f"${int(number)}={value:g}")
 
+    def prepare(self, *, home: bool = False, unlock: bool = False) -> None:
+        """Connect, read the setup, clear an alarm only as asked, set and check the work offset.
+
+        Raises
+        ------
+        UserError
+            Locked in alarm and neither ``home`` nor ``unlock``; limits outside the machine space.
+        GrblAlarm
+            Homing failed (the message says why and what to change).
+        """
+        how = self.connect()
+        self.read_setup()
+        if self.alarm is not None:
+            why = ("it was halted by an alarm (ALARM:1/2 need a soft reset, which nlosplan sent) and is now locked"
+                   if how == "reset" else "it is locked in alarm (power-up lock with homing enabled, or after an "
+                   "alarm)")
+            if home:
+                self.home()
+            elif unlock:
+                self.unlock()
+            else:
+                raise UserError(f"the gantry on {self.port_name}: {why}; pass --home (runs $H) or --unlock (sends "
+                                "$X; only if you know where it is)")
+        elif home:
+            self.home()
+        self.set_frame()
+
+    def set_frame(self) -> WorkFrame:
+        """Choose the work offset, set it (G10 L2 P1, G92.1, G54) when needed, and check it in a status report."""
+        wco = tuple(a + b for a, b in zip(self.ngc.get("G54", (0, 0, 0)), self.ngc.get("G92", (0, 0, 0))))
+        frame = plan_frame(self.work_offset, self.limits_mm, self.settings,
+                           force_origin=bool(self.build and self.build.force_origin),
+                           active_wco=self._wco[:2] if self._wco else wco[:2])
+        if frame.mode != "keep":
+            g54, g92 = self.ngc.get("G54", (0.0, 0.0, 0.0)), self.ngc.get("G92", (0.0, 0.0, 0.0))
+            changed = False
+            if any(abs(a - b) > TOL_MM / 2 for a, b in zip(g54[:2], frame.offset_mm)):
+                self.send(f"G10 L2 P1 X{frame.offset_mm[0]:.3f} Y{frame.offset_mm[1]:.3f}")   # stored in EEPROM
+                changed = True
+            if any(abs(v) > 0 for v in g92):
+                self.send("G92.1")
+                changed = True
+            self.send("G54")
+            if changed:
+                self.ngc = parse_ngc_parameters(self.send("$#"))
+        self.frame = frame
+        self._check_wco(self._report_with_wco())
+        return frame
+
+    def _report_with_wco(self) -> tuple:
+        for _ in range(40):   # GRBL sends WCO at the latest every 10 idle reports, and at once after a change
+            st = self.status(context="reading the work offset")
+            if st.wco is not None:
+                return st.wco
+            time.sleep(0.01)
+        raise DeviceTimeout(f"gantry on {self.port_name}: no status report with the work offset (WCO) in 40")
+
+    def _check_wco(self, wco) -> None:
+        f = self.frame
+        if f is not None and any(abs(a - b) > TOL_MM for a, b in zip(wco[:2], f.offset_mm)):
+            raise FrameChanged(f"gantry on {self.port_name}: the work offset is ({wco[0]:g}, {wco[1]:g}) mm but "
+                               f"nlosplan set ({f.offset_mm[0]:g}, {f.offset_mm[1]:g}) mm: something else sent "
+                               "G10/G92/G55; user-frame positions would be wrong (rerun to set it again)")
+
     def home(self, timeout: float = 120.0) -> Status:
-        """``$H`` homing cycle (needs ``$22=1``); returns the status after it."""
-        self.send("$H", timeout=timeout)
+        """``$H`` homing cycle (needs ``$22=1``); on failure the alarm says why (Z first, stuck pins)."""
+        before = self.status(context="before homing")
+        try:
+            self.send("$H", timeout=timeout)
+        except GrblAlarm as exc:   # GRBL resets itself after a failed cycle: its ok, then a banner
+            try:
+                for line in self._reader.read_until_quiet(0.2, 2.0):
+                    if line.strip().startswith("Grbl "):
+                        self.banner = line.strip()
+            except DeviceTimeout:
+                pass
+            after = self.status(context="after homing failed")
+            self.alarm = exc.code
+            raise GrblAlarm(exc.code, "while homing ($H)", homing_diagnosis(exc.code, before, after)) from None
         self.alarm = None
-        return self.wait_idle()
+        return self.wait_idle(context="after homing")
 
     def unlock(self) -> None:
         """``$X``: clear an alarm lock without homing (only when the user asks for it)."""
         self.send("$X")
         self.alarm = None
 
-    # ------------------------------------------------------------------ real-time
-    def status(self, timeout: float | None = None, context: str = "while polling status") -> Status:
-        """Poll ``?`` and return the report.
-
-        Raises
-        ------
-        GrblAlarm
-            An ``ALARM:`` line arrived while waiting.
-        """
-        timeout = self.timeout if timeout is None else timeout
-        self._write(b"?")
-        deadline = time.monotonic() + timeout
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise DeviceTimeout(f"gantry on {self.port_name}: no status report within {timeout:g} s")
+    def recover(self, *, home: bool = False, unlock: bool = False) -> Status:
+        """Clear an alarm by GRBL's rules: soft reset first when it is halted (ALARM:1/2), then ``$H`` or ``$X``."""
+        if not (home or unlock):
+            raise UserError("clearing a gantry alarm needs home=True ($H) or unlock=True ($X)")
+        if self.alarm in CRITICAL_ALARMS:
+            self.soft_reset()
+        else:
             try:
-                line = self._reader.readline(min(left, self.repoll_s))
-            except DeviceTimeout:
-                self._write(b"?")   # the report was lost or garbled beyond recognition: ask again
-                continue
-            kind = self._handle(line, context)
-            if kind == "status":
-                return self.last_status
-            if kind == "bad status":
-                self._write(b"?")
+                self.status(timeout=1.0)
+            except DeviceTimeout:   # halted (an alarm this driver did not see): only a reset is heard
+                self.soft_reset()
+        self.home() if home else self.unlock()
+        if self.frame is not None:
+            self._check_wco(self._report_with_wco())
+        return self.status()
 
-    def wait_idle(self, timeout: float | None = None, context: str = "") -> Status:
-        """Poll ``?`` until the state is Idle; returns that report.
-
-        Raises
-        ------
-        GrblAlarm
-            ``ALARM:N`` arrived or the state turned Alarm (e.g. a hard limit mid-move).
-        DeviceTimeout
-            Not Idle within ``timeout`` (default ``move_timeout``).
-        """
-        timeout = self.move_timeout if timeout is None else timeout
-        deadline = time.monotonic() + timeout
-        while True:
-            st = self.status(context=context)
-            if st.state == "Idle":
-                return st
-            if st.state == "Alarm":
-                self.alarm = self.alarm or -1
-                raise GrblAlarm(self.alarm if self.alarm and self.alarm > 0 else 0, context)
-            if time.monotonic() > deadline:
-                raise DeviceTimeout(f"gantry not Idle within {timeout:g} s (state {st.state})")
-            time.sleep(self.poll_s)
-
-    def feed_hold(self) -> None:
-        """``!``: decelerate to a stop and hold (resume with :meth:`resume`)."""
-        self._write(b"!")
-
-    def resume(self) -> None:
-        """``~``: resume after a feed hold."""
-        self._write(b"~")
-
-    def soft_reset(self, timeout: float = 5.0) -> str:
-        """0x18: reset GRBL (a reset during motion raises ALARM:3 afterwards); returns the new banner."""
-        self._write(b"\x18")
-        if self._await_banner(time.monotonic() + timeout, "at reset"):
-            return self.banner
-        raise DeviceTimeout(f"no GRBL banner within {timeout:g} s after a soft reset")
-
-    # ------------------------------------------------------------------ motion
+    # ------------------------------------------------------------------ motion in the user frame
     def check_limits(self, x_mm: float, y_mm: float) -> None:
-        """Raise :class:`LimitError` when (x, y) mm is outside the soft limits (nothing is sent)."""
-        (x0, x1), (y0, y1) = self.limits_mm
-        if not (math.isfinite(x_mm) and math.isfinite(y_mm)):
-            raise LimitError(f"gantry target ({x_mm}, {y_mm}) mm is not finite")
-        if not (x0 <= x_mm <= x1 and y0 <= y_mm <= y1):
-            raise LimitError(f"gantry target ({x_mm:.3f}, {y_mm:.3f}) mm is outside the limits "
-                             f"x {x0:g}..{x1:g}, y {y0:g}..{y1:g} mm; nothing was sent")
+        """Raise :class:`LimitError` when (x, y) mm is outside the limits (nothing is sent)."""
+        check_box(self.limits_mm, x_mm, y_mm)
 
-    def move_to(self, x_mm: float, y_mm: float, *, feed_mm_min: float | None = None, wait: bool = True) -> Status | None:
-        """Absolute move in mm (``G90 G21 G1 X Y F``); waits for Idle unless ``wait=False``.
+    def move_to(self, x_mm: float, y_mm: float, *, feed_mm_min: float | None = None,
+                wait: bool = True) -> GantryPosition | None:
+        """Absolute move in the user frame (``G90 G21 G1 X Y F``: work coordinates); waits for Idle.
 
         Returns
         -------
-        Status or None
-            The Idle report at the target (its ``mpos`` is the reported position).
+        GantryPosition or None
+            The position reported at the target (None with ``wait=False``).
 
         Raises
         ------
         LimitError
-            Target outside the soft limits (checked before sending).
-        GrblAlarm, GrblError, DeviceTimeout, ConnectionLost
+            Target outside the limits (checked before sending).
+        GrblAlarm, GrblError, DeviceTimeout, ConnectionLost, FrameChanged
         """
         x, y = float(x_mm), float(y_mm)
         self.check_limits(x, y)
@@ -348,19 +275,36 @@ class Grbl:
         self.send(f"G90 G21 G1 X{x:.3f} Y{y:.3f} F{feed:.0f}")
         if not wait:
             return None
-        return self.wait_idle(context=f"moving to ({x:.3f}, {y:.3f}) mm")
+        return self._position(self.wait_idle(context=f"moving to ({x:.3f}, {y:.3f}) mm"))
 
-    def close(self) -> None:
-        """Close the port (if this driver opened it)."""
-        if self._owned and self._ser is not None:
-            try:
-                self._ser.close()
-            except Exception:  # noqa: BLE001 - closing a dead port
-                pass
-            self._ser = None
+    def where(self) -> GantryPosition:
+        """The reported position now, in the user frame (and raw MPos/WCO)."""
+        return self._position(self.status())
 
-    def __enter__(self) -> "Grbl":
-        return self
+    def _position(self, st: Status) -> GantryPosition:
+        if st.wco is not None:
+            self._check_wco(st.wco)
+        wco = self.frame.offset_mm if self.frame is not None else (self._wco or (0.0, 0.0))[:2]
+        mpos = st.mpos if st.mpos is not None else tuple(a + b for a, b in zip(st.wpos, wco))
+        xy = (round(mpos[0] - wco[0], 4), round(mpos[1] - wco[1], 4))
+        self.last_xy = xy
+        return GantryPosition(xy, {"mpos_mm": list(mpos), "wco_mm": list(wco)}, st.state)
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def blocked(self) -> str | None:
+        """Why the gantry must not move now (an alarm), or None."""
+        if self.alarm is None:
+            return None
+        code = f"ALARM:{self.alarm}" if self.alarm and self.alarm > 0 else "Alarm state"
+        return f"in alarm ({code})"
+
+    def describe(self) -> dict:
+        """Port, firmware, settings that matter and the user frame (stored with every capture)."""
+        s = self.settings
+        out = {"kind": "grbl", "port": self.port_name, "banner": self.banner, "connected_by": self.connected_by,
+               "version": self.build.version if self.build else None, "build": self.build.build if self.build else None,
+               "options": self.build.options if self.build else None, "feed_mm_min": self.feed_mm_min,
+               "limits_mm": [list(v) for v in self.limits_mm],
+               "settings": {f"${k}": s[k] for k in (20, 22, 23, 100, 101, 110, 111, 120, 121, 130, 131) if k in s}}
+        if self.frame is not None:
+            out.update(self.frame.describe())
+        return out

@@ -1,10 +1,14 @@
-"""A rig: the sensor, gantry and lights drivers and their configuration, real or emulated.
+"""A rig: the sensor, gantry and lights drivers and their configuration, each device real or emulated.
 
-:func:`open_rig` opens the real devices; :func:`emulated_rig` starts both pty
-emulators backed by the fast simulator (the DENALI scene with the object at
-the emulated gantry's current position, any (x, y) within the limits) and
-opens the *same* drivers on their ptys (STYLE.md 6, 7: one seeded factory for
-the whole bench).
+:func:`rig_session` opens the rig: the gantry first (GRBL, Telemetrix, or
+``auto``: whichever answers; prepared by the firmware's rules), then the
+sensor (started in its mode). Either device may be a pty emulator instead
+(``emulate={"lidar"}``, ``{"gantry"}`` or both): the emulated TMF8828
+streams histograms of the DENALI scene from the fast simulator with the
+object wherever the gantry is (the emulated gantry's position, or the real
+gantry's last reported one), and the *same* drivers open the emulators'
+ptys (STYLE.md 6, 7: one seeded factory for the whole bench).
+:func:`emulated_rig` is the all-emulated bench; :func:`open_rig` the real one.
 """
 
 from __future__ import annotations
@@ -16,7 +20,12 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["Rig", "emulated_rig", "open_rig", "sensor_preset"]
+__all__ = ["DEVICES", "Rig", "device_errors", "emulated_rig", "open_gantry", "open_rig", "rig_session",
+           "sensor_preset"]
+
+DEVICES = ("lidar", "gantry")
+#: Settings of the emulated GRBL gantry beyond GRBL's defaults (a belt gantry: 100 mm/s, 500 mm/s²).
+EMULATED_GRBL = {110: 6000.0, 111: 6000.0, 120: 500.0, 121: 500.0}
 
 
 @dataclass
@@ -26,7 +35,7 @@ class Rig:
     Attributes
     ----------
     sensor : TMF8828
-    gantry : Grbl
+    gantry : Grbl or TelemetrixGantry
     lights : object with ``state`` and ``set(on)``
     sensor_config : SensorConfig
         The sensor model the captures are stored with.
@@ -35,9 +44,10 @@ class Rig:
     feed_mm_min : float
     park_mm : (x, y) or None
         Where finalize parks the gantry (None: leave it).
-    emulated : bool
+    emulated : tuple of str
+        The emulated devices (``"lidar"``, ``"gantry"``); empty for a real rig.
     emulators : tuple
-        The emulator objects (empty for real hardware).
+        The emulator objects.
     """
 
     sensor: object
@@ -47,16 +57,28 @@ class Rig:
     geometry: str | None = "denali"
     feed_mm_min: float = 3000.0
     park_mm: tuple | None = (0.0, 0.0)
-    emulated: bool = False
+    emulated: tuple = ()
     emulators: tuple = ()
 
     def close(self) -> None:
         """Close the drivers (the sensor is stopped first)."""
         for dev in (self.sensor, self.gantry):
             try:
-                dev.close()
+                if dev is not None:
+                    dev.close()
             except Exception:  # noqa: BLE001 - closing must reach every device
                 pass
+
+
+def device_errors() -> tuple[type, ...]:
+    """The exceptions by which a device (not the user's input) ends an open or a run."""
+    from nlosplan.hardware.grbl_frame import FrameChanged
+    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
+    from nlosplan.hardware.telemetrix import TelemetrixError
+    from nlosplan.hardware.tmf8828 import SensorError
+    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
+
+    return GrblAlarm, GrblError, FrameChanged, TelemetrixError, SensorError, ConnectionLost, DeviceTimeout
 
 
 def sensor_preset(zones: str, range_mode: str):
@@ -72,60 +94,71 @@ def sensor_preset(zones: str, range_mode: str):
     return preset(name)
 
 
-def _prepare_gantry(gantry, *, home: bool, unlock: bool) -> None:
-    gantry.connect()
-    if gantry.alarm is not None:
-        if home:
-            gantry.home()
-        elif unlock:
-            gantry.unlock()
-        else:
-            raise UserError(f"the gantry on {gantry.port_name} is locked in alarm; pass --home (run $H) or "
-                            "--unlock (send $X, only if you know where it is)")
-    elif home:
-        gantry.home()
-
-
-def open_rig(lidar, gantry, *, zones: str = "3x3", range_mode: str = "short", baudrate: int = 2_000_000,
-             sensor_config=None, limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0,
-             lights=None, home: bool = False, unlock: bool = False, park_mm=(0.0, 0.0),
-             geometry: str | None = "denali") -> Rig:
-    """Open the real rig: TMF8828 on ``lidar``, GRBL on ``gantry``; start measuring.
+def detect_gantry_kind(port) -> str:
+    """``grbl`` or ``telemetrix``: which firmware answers on ``port`` (Telemetrix asked first, harmlessly for GRBL).
 
     Raises
     ------
     UserError
-        A port cannot be opened, the gantry is locked and neither ``home`` nor ``unlock`` was given.
+        Neither answers (one line: nothing, or what arrived).
+    """
+    from nlosplan.hardware.gantry import probe_firmware
+    from nlosplan.hardware.transport import open_serial
+
+    ser, owned = open_serial(port, 115200)
+    try:
+        found = probe_firmware(ser, timeout=6.0, status_after_s=3.0, reset_after_s=4.5)
+    finally:
+        if owned:
+            ser.close()
+    if found.kind is None:
+        raise UserError(f"--gantry-kind auto: neither GRBL nor Telemetrix4Arduino answers on {port} "
+                        f"(got {found.describe_seen()}): wrong port, controller off, or another firmware")
+    return found.kind
+
+
+def open_gantry(kind: str, port, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0,
+                work_offset="auto", telemetrix=None, home: bool = False, unlock: bool = False, poll_s: float = 0.05):
+    """Open and prepare a gantry driver of ``kind`` (``grbl``, ``telemetrix`` or ``auto``) on ``port``.
+
+    Raises
+    ------
+    UserError
+        Locked in alarm without ``home``/``unlock``, limits outside the machine space, wrong firmware, ...
+    GrblAlarm, GrblError, TelemetrixError, DeviceTimeout, ConnectionLost
+        The device failed (the caller turns these into one line).
     """
     from nlosplan.hardware.grbl import Grbl
-    from nlosplan.hardware.lights import ManualLights
-    from nlosplan.hardware.tmf8828 import TMF8828
+    from nlosplan.hardware.telemetrix import TelemetrixGantry
 
-    cfg = sensor_config or sensor_preset(zones, range_mode)
-    sensor = TMF8828(lidar, baudrate=baudrate)
+    if kind == "auto":
+        kind = detect_gantry_kind(port)
+    if kind == "grbl":
+        if telemetrix is not None:
+            raise UserError("--rig-file describes a Telemetrix gantry; this one is GRBL (drop --rig-file)")
+        g = Grbl(port, limits_mm=limits_mm, feed_mm_min=feed_mm_min, work_offset=work_offset, poll_s=poll_s)
+    elif kind == "telemetrix":
+        if work_offset != "auto":
+            raise UserError("--work-offset is GRBL's; a Telemetrix gantry's origin is origin_mm in its --rig-file")
+        g = TelemetrixGantry(port, config=telemetrix, limits_mm=limits_mm, feed_mm_min=feed_mm_min)
+    else:
+        raise UserError(f"gantry kind {kind!r}; allowed: grbl, telemetrix, auto")
     try:
-        g = Grbl(gantry, limits_mm=limits_mm, feed_mm_min=feed_mm_min)
+        g.prepare(home=home, unlock=unlock)
     except BaseException:
-        sensor.close()
+        g.close()
         raise
-    rig = Rig(sensor, g, lights or ManualLights(), cfg, geometry, feed_mm_min, park_mm)
-    try:
-        _prepare_gantry(g, home=home, unlock=unlock)
-        sensor.start(zones, range_mode)
-    except BaseException:
-        rig.close()
-        raise
-    return rig
+    return g
 
 
 class SceneHistograms:
-    """Expected histograms of the DENALI scene at the emulated gantry's position (cached per 0.1 mm).
+    """Expected histograms of the DENALI scene at the gantry's position (cached per 0.1 mm).
 
     Parameters
     ----------
     obj, size : str
     position : callable
-        ``position() -> (x_mm, y_mm)`` of the gantry.
+        ``position() -> (x_mm, y_mm)`` of the gantry in the user frame.
     lights : EmulatedLights
     fidelity : str
         Fast-simulator fidelity (``draft`` ≈ 40 ms per new position after compiling).
@@ -162,64 +195,121 @@ class SceneHistograms:
         return hit, sensor.bin_width_ps
 
 
+def _gantry_emulator(kind: str, *, time_scale: float, limits_mm, faults, settings, telemetrix):
+    """The emulator of a gantry kind and a position function in the user frame."""
+    from nlosplan.hardware.emulators import EmulatedGrbl, EmulatedTelemetrix
+    from nlosplan.hardware.telemetrix_config import TelemetrixConfig
+
+    if kind == "grbl":
+        (x0, x1), (y0, y1) = limits_mm
+        emu = EmulatedGrbl(time_scale=time_scale, faults=faults,
+                           settings={**EMULATED_GRBL, 130: x1 - x0, 131: y1 - y0, **(settings or {})})
+        return emu, emu.position
+    if kind == "telemetrix":
+        if faults is not None and any(getattr(faults, k) for k in faults.__dataclass_fields__):
+            raise UserError("the emulated Telemetrix gantry takes no faults (they are GRBL's: alarm, slow-ok)")
+        cfg = telemetrix or TelemetrixConfig()
+        emu = EmulatedTelemetrix(time_scale=time_scale)
+        return emu, lambda: cfg.to_mm(*emu.steps())
+    raise UserError(f"an emulated gantry is grbl or telemetrix, not {kind!r} (auto probes a real port)")
+
+
 @contextmanager
-def emulated_rig(*, obj: str = "A", size: str = "8in", zones: str = "3x3", range_mode: str = "short",
-                 lights: bool = False, fidelity: str = "draft", seed: int = 0, time_scale: float = 20.0,
-                 frame_period_s: float = 0.02, sensor_faults=None, gantry_faults=None,
-                 limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0, park_mm=(0.0, 0.0),
-                 quiet_s: float = 0.05, frame_timeout: float = 5.0, gantry_settings: dict | None = None,
-                 home: bool = False, unlock: bool = False, sensor_config=None) -> Iterator[Rig]:
-    """Both emulators on ptys, the production drivers opened on them, measuring.
+def rig_session(*, lidar=None, gantry=None, emulate=DEVICES, gantry_kind: str = "grbl", telemetrix=None,
+                work_offset="auto", zones: str = "3x3", range_mode: str = "short", baudrate: int = 2_000_000,
+                sensor_config=None, limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0,
+                lights=None, lights_on: bool = False, home: bool = False, unlock: bool = False, park_mm=(0.0, 0.0),
+                geometry: str | None = "denali", obj: str = "A", size: str = "8in", fidelity: str = "draft",
+                seed: int = 0, time_scale: float = 20.0, frame_period_s: float = 0.02, sensor_faults=None,
+                gantry_faults=None, gantry_settings: dict | None = None, quiet_s: float = 0.05,
+                frame_timeout: float = 5.0) -> Iterator[Rig]:
+    """Open the rig (gantry, then sensor), each device on its port or on a pty emulator; close it at the end.
 
     Parameters
     ----------
-    obj, size, lights
-        The DENALI scene of the emulated sensor (lights: initial state).
-    zones, range_mode : str
-        TMF8828 mode (a ``tmf8828-<zones>-<range>`` preset must exist).
-    fidelity : str
-        Simulator fidelity of the emulated histograms.
-    seed : int
-        Poisson noise seed.
-    time_scale : float
-        Emulated motion runs this much faster than real time.
-    frame_period_s : float
-        Emulated frame period.
-    sensor_faults, gantry_faults : SensorFaults, GantryFaults, optional
-    gantry_settings : dict, optional
-        GRBL ``$N`` overrides (e.g. ``{22: 1}`` to need homing).
-    sensor_config : SensorConfig, optional
-        The model stored with the captures (default: the mode's preset, which
-        also makes the emulated histograms).
+    lidar, gantry : str or serial object, optional
+        Ports of the real devices (not for emulated ones).
+    emulate : iterable of {"lidar", "gantry"}
+    gantry_kind : {"grbl", "telemetrix", "auto"}
+    telemetrix : TelemetrixConfig, optional
+        The Telemetrix rig file (default: DENALI's).
+    work_offset : "auto", "keep" or (x, y)
+        GRBL only (:mod:`~nlosplan.hardware.grbl_frame`).
+    lights : lights object, optional
+        For a real sensor (default: ask a person); an emulated sensor has emulated lights (``lights_on``).
+    obj, size, fidelity, seed, frame_period_s, sensor_faults, quiet_s, frame_timeout
+        The emulated sensor.
+    time_scale, gantry_faults, gantry_settings
+        The emulated gantry (``gantry_settings``: GRBL ``$N`` values).
 
     Yields
     ------
     Rig
-        With ``emulated=True`` and ``emulators=(lidar emulator, gantry emulator)``.
+
+    Raises
+    ------
+    UserError
+        A port is given for an emulated device or missing for a real one, and what the drivers raise.
     """
-    from nlosplan.hardware.emulators import EmulatedGrbl, EmulatedTMF8828
-    from nlosplan.hardware.grbl import Grbl
-    from nlosplan.hardware.lights import EmulatedLights
+    from nlosplan.hardware.emulators import EmulatedTMF8828
+    from nlosplan.hardware.lights import EmulatedLights, ManualLights
     from nlosplan.hardware.tmf8828 import TMF8828
 
+    emulate = tuple(d for d in DEVICES if d in set(emulate))
+    for name, port in (("lidar", lidar), ("gantry", gantry)):
+        if name in emulate and port is not None:
+            raise UserError(f"--{name} {port} and an emulated {name} name the same device: drop one")
+        if name not in emulate and port is None:
+            raise UserError(f"give --{name} PORT for the real {name}, or emulate it")
     cfg = sensor_config or sensor_preset(zones, range_mode)
-    (x0, x1), (y0, y1) = limits_mm
-    settings = {130: x1, 131: y1, **(gantry_settings or {})}
-    light = EmulatedLights(lights)
-    g_emu = EmulatedGrbl(time_scale=time_scale, settings=settings, faults=gantry_faults).start()
-    hist = SceneHistograms(obj, size, g_emu.position, light, fidelity)
-    hist(zones, range_mode)  # compile the simulator before the sensor streams
-    s_emu = EmulatedTMF8828(hist, frame_period_s=frame_period_s, seed=seed, faults=sensor_faults).start()
-    rig = None
+    emulators, sensor, g = [], None, None
     try:
-        sensor = TMF8828(s_emu.port, quiet_s=quiet_s, frame_timeout=frame_timeout)
-        gantry = Grbl(g_emu.port, limits_mm=limits_mm, feed_mm_min=feed_mm_min, poll_s=0.01)
-        rig = Rig(sensor, gantry, light, cfg, "denali", feed_mm_min, park_mm, True, (s_emu, g_emu))
-        _prepare_gantry(gantry, home=home, unlock=unlock)
+        if "gantry" in emulate:
+            g_emu, position = _gantry_emulator(gantry_kind, time_scale=time_scale, limits_mm=limits_mm,
+                                               faults=gantry_faults, settings=gantry_settings, telemetrix=telemetrix)
+            emulators.append(g_emu.start())
+            g = open_gantry(gantry_kind, g_emu.port, limits_mm=limits_mm, feed_mm_min=feed_mm_min,
+                            work_offset=work_offset, telemetrix=telemetrix, home=home, unlock=unlock, poll_s=0.01)
+        else:
+            g = open_gantry(gantry_kind, gantry, limits_mm=limits_mm, feed_mm_min=feed_mm_min,
+                            work_offset=work_offset, telemetrix=telemetrix, home=home, unlock=unlock)
+
+            def position():
+                return g.last_xy or (limits_mm[0][0], limits_mm[1][0])
+        if "lidar" in emulate:
+            light = EmulatedLights(lights_on)
+            hist = SceneHistograms(obj, size, position, light, fidelity)
+            hist(zones, range_mode)  # compile the simulator before the sensor streams
+            s_emu = EmulatedTMF8828(hist, frame_period_s=frame_period_s, seed=seed, faults=sensor_faults).start()
+            emulators.append(s_emu)
+            sensor = TMF8828(s_emu.port, quiet_s=quiet_s, frame_timeout=frame_timeout)
+        else:
+            light = lights or ManualLights()
+            sensor = TMF8828(lidar, baudrate=baudrate)
+        rig = Rig(sensor, g, light, cfg, geometry, feed_mm_min, park_mm, emulate, tuple(emulators))
         sensor.start(zones, range_mode)
         yield rig
     finally:
-        if rig is not None:
-            rig.close()
-        s_emu.close()
-        g_emu.close()
+        for dev in (sensor, g):
+            if dev is not None:
+                try:
+                    dev.close()
+                except Exception:  # noqa: BLE001 - closing must reach every device
+                    pass
+        for emu in emulators:
+            emu.close()
+
+
+def emulated_rig(**kw) -> Iterator[Rig]:
+    """Both devices emulated (:func:`rig_session` with ``emulate=("lidar", "gantry")``); a context manager.
+
+    ``lights`` (bool) is the emulated lights' initial state.
+    """
+    if "lights" in kw:
+        kw["lights_on"] = bool(kw.pop("lights"))
+    return rig_session(emulate=DEVICES, **kw)
+
+
+def open_rig(lidar, gantry, **kw) -> Iterator[Rig]:
+    """Both devices real (:func:`rig_session` with ``emulate=()``); a context manager."""
+    return rig_session(lidar=lidar, gantry=gantry, emulate=(), **kw)

@@ -20,11 +20,23 @@ from nlosplan.errors import UserError
 from nlosplan.hardware.tmf8828_protocol import Frame, FrameAssembler, RangeMode, ZoneMode, start_sequence
 from nlosplan.hardware.transport import TMF8828_BAUDS, ConnectionLost, DeviceTimeout, LineReader, open_serial
 
-__all__ = ["TMF8828", "SensorError"]
+__all__ = ["TMF8828", "SensorError", "SensorGarbage"]
 
 
 class SensorError(RuntimeError):
     """The sensor firmware did not do what it was asked (no answer to a command, no frames)."""
+
+
+class SensorGarbage(SensorError):
+    """The port answers with bytes that are not the ams firmware's protocol (wrong baud rate, another device).
+
+    Not worth a retry: reconnecting does not change what is on the port.
+    """
+
+
+def _noise(line: str) -> bool:
+    """A line no firmware prints: bytes that do not decode as ASCII, or control characters."""
+    return any(ch == "\ufffd" or (ord(ch) < 32 and ch != "\t") or ord(ch) > 126 for ch in line)
 
 
 class TMF8828:
@@ -54,6 +66,7 @@ class TMF8828:
         self._port_arg = port
         self.baudrate = int(baudrate)
         self.quiet_s, self.command_timeout, self.frame_timeout = quiet_s, command_timeout, frame_timeout
+        self.garbage_s = 3.0   # lines but no histogram data for this long: not the sensor's protocol
         self._ser, self._owned = open_serial(port, self.baudrate)
         self._reader = LineReader(self._ser)
         self.zones: ZoneMode | None = None
@@ -86,6 +99,11 @@ class TMF8828:
         except DeviceTimeout:
             raise SensorError(f"TMF8828 on {self.port_name}: no answer to command {char!r} within "
                               f"{self.command_timeout:g} s (wrong port or baud rate {self.baudrate}?)") from None
+        if lines and all(_noise(ln) for ln in lines):
+            raise SensorGarbage(f"TMF8828 on {self.port_name} answers command {char!r} with noise ({len(lines)} "
+                                f"lines, e.g. {lines[0][:24]!r}): wrong baud rate (this one {self.baudrate}; the ams "
+                                "firmware runs at 115200, 1000000 or 2000000, DENALI's at 2000000) or not the "
+                                "sensor's port")
         self.transcript.append((char, lines))
         return lines
 
@@ -181,16 +199,26 @@ class TMF8828:
             self._reader.flush()
             self.assembler.reset()
         to_skip = skip if fresh else 0
-        deadline = time.monotonic() + timeout
+        t0 = time.monotonic()
+        deadline = t0 + timeout
+        data_seen, lines, sample = False, 0, ""
         while True:
-            left = deadline - time.monotonic()
+            now = time.monotonic()
+            left = deadline - now
             if left <= 0:
                 raise SensorError(f"TMF8828 on {self.port_name}: no complete {self.zones.value} frame within "
                                   f"{timeout:g} s ({self.assembler.stats.dropped_frames} dropped so far)")
+            if now - t0 > self.garbage_s and lines >= 20 and not data_seen:
+                raise SensorGarbage(f"TMF8828 on {self.port_name}: {lines} lines in {now - t0:.1f} s, "
+                                    f"none of them histogram data (e.g. {sample[:30]!r}): another device on this "
+                                    "port, a wrong baud rate, or a firmware that does not stream histograms")
             try:
-                line = self._reader.readline(left)
+                line = self._reader.readline(min(left, 0.5))
             except DeviceTimeout:
                 continue
+            lines += 1
+            sample = sample or line
+            data_seen = data_seen or line.lstrip()[:4] in ("#Raw", "#Cal", "#Obj")
             for frame in self.assembler.feed(line):
                 if to_skip:
                     to_skip -= 1

@@ -146,6 +146,11 @@ class LineReader:
         self._buf.clear()
         return [ln.rstrip("\r") for ln in text.split("\n") if ln.strip()]
 
+    def unread(self, data: bytes) -> None:
+        """Put bytes read elsewhere (e.g. by a firmware probe) back in front of the buffer."""
+        if data:
+            self._buf[:0] = data
+
     def flush(self) -> None:
         """Drop what is buffered here and in the OS input queue (and the cut line that follows)."""
         self._buf.clear()

@@ -28,6 +28,8 @@ from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
 
 FLASH_PROFILES = ("gaussian", "uniform")
+#: Fields holding one value per zone (row-major); None means the neutral value for every zone.
+ZONE_FIELDS = ("zone_time_offsets_ps", "zone_time_scales", "zone_gains", "zone_overlap_m")
 MAX_ZONES_PER_AXIS = 16
 MAX_BINS = 4096
 
@@ -83,9 +85,41 @@ class SensorConfig:
         Expected crosstalk (cover-glass) photons per iteration per zone at
         zero optical path (>= 0).
     pileup : bool
-        Apply first-photon pile-up (Coates model).
+        Apply flux-dependent detection: each of the zone's ``spads_per_zone``
+        detectors records at most one photon per ``dead_time_ps`` (first-photon
+        pile-up, Coates' model, when the dead time outlasts the window); ambient
+        and dark counts in the window count toward it.
     saturation : bool
         Clip counts at the 24-bit register maximum.
+    zone_time_offsets_ps : tuple of float, optional
+        Per-zone time offset, ps, added to every arrival of the zone (its TDC
+        delay), row-major, one per zone; None: all 0.
+    zone_time_scales : tuple of float, optional
+        Per-zone clock rate (> 0, row-major): the zone records light arriving
+        ``t`` ps after emission at ``s_z * t + zone_time_offsets_ps[z]`` (its
+        TDC's time scale relative to the sensor's bins); None: all 1.
+    zone_gains : tuple of float, optional
+        Per-zone relative gain (>= 0, row-major, one per zone) multiplying all
+        light of the zone; None: all 1.
+    zone_overlap_m : tuple of float, optional
+        Per-zone near-field overlap distance ``d0``, metres (>= 0, row-major):
+        light arriving at time ``t`` is weighted by ``r^2 / (r^2 + d0^2)`` with
+        ``r = c t / 2`` (the range for a first bounce); None: no overlap loss.
+    pulse_tail_fraction : float
+        Share of the impulse response in an exponential tail that continues the
+        measured pulse shape after its last sample, in [0, 1); needs a
+        ``pulse_shape``. 0: no tail.
+    pulse_tail_decay_ps : float
+        E-folding time of that tail, ps (> 0).
+    time_walk_ps : float
+        Flux-dependent timing: a zone records its light earlier by this many ps
+        per decade of its signal (photons per iteration, 1 = no shift), ps; 0: none.
+    spads_per_zone : int
+        Independent detectors sharing a zone's light equally (with ``pileup``), >= 1.
+    dead_time_ps : float, optional
+        Non-paralyzable dead time of each detector after a detection, ps (> 0);
+        None: blind for the rest of the laser iteration (Coates' first-photon
+        model). Used only with ``pileup``.
     notes : str
         Provenance: where the values come from.
     """
@@ -114,6 +148,15 @@ class SensorConfig:
     crosstalk: float = 0.0
     pileup: bool = False
     saturation: bool = True
+    zone_time_offsets_ps: tuple[float, ...] | None = None
+    zone_time_scales: tuple[float, ...] | None = None
+    zone_gains: tuple[float, ...] | None = None
+    zone_overlap_m: tuple[float, ...] | None = None
+    pulse_tail_fraction: float = 0.0
+    pulse_tail_decay_ps: float = 1000.0
+    time_walk_ps: float = 0.0
+    spads_per_zone: int = 1
+    dead_time_ps: float | None = None
     notes: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -139,6 +182,13 @@ class SensorConfig:
             if abs(total - 1.0) > 1e-12:  # normalise once; re-normalising would drift in the last digit
                 shape = shape / total
             object.__setattr__(self, "pulse_shape", tuple(float(v) for v in shape))
+        for name in ZONE_FIELDS:
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple, np.ndarray)):
+                raise UserError(f"{name} must be a list of numbers, one per zone (row-major), or left out")
+            object.__setattr__(self, name, tuple(_finite_number(f"{name}[{i}]", v) for i, v in enumerate(value)))
         validate(self)
 
     # ------------------------------------------------------------------ derived
@@ -173,19 +223,42 @@ class SensorConfig:
     def replace(self, **changes: Any) -> "SensorConfig":
         """Return a copy with some fields changed (validated again).
 
+        Changing the zone grid drops the per-zone values (they belong to one
+        unit's layout) and removing ``pulse_shape`` drops its tail, unless the
+        same call gives them.
+
         Raises
         ------
         UserError
             For unknown field names or invalid values.
         """
         check_keys(changes, sorted(f.name for f in dataclasses.fields(self)), "sensor parameter(s)")
+        grid = (changes.get("zones_rows", self.zones_rows), changes.get("zones_cols", self.zones_cols))
+        if grid != (self.zones_rows, self.zones_cols):
+            # per-zone values belong to one unit's zone layout: another layout starts neutral
+            for name in ZONE_FIELDS:
+                changes.setdefault(name, None)
+        if "pulse_shape" in changes and changes["pulse_shape"] is None:
+            changes.setdefault("pulse_tail_fraction", 0.0)  # the tail continues the measured pulse: it goes with it
         return dataclasses.replace(self, **changes)
+
+    def linear_uniform(self) -> "SensorConfig":
+        """This sensor made linear and alike in every zone.
+
+        No pile-up or dead time, no per-zone gains, offsets, time scales or
+        overlap, no time walk and no pulse tail; everything else kept. The
+        reference for physics checks that must not depend on one unit's
+        calibration (inverse-square law, symmetry, linear parts).
+        """
+        return self.replace(pileup=False, spads_per_zone=1, dead_time_ps=None, time_walk_ps=0.0,
+                            pulse_tail_fraction=0.0, **{name: None for name in ZONE_FIELDS})
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data dictionary (JSON/TOML friendly; ``pulse_shape`` as a list)."""
         out = dataclasses.asdict(self)
-        if out["pulse_shape"] is not None:
-            out["pulse_shape"] = list(out["pulse_shape"])
+        for name in ("pulse_shape",) + ZONE_FIELDS:
+            if out[name] is not None:
+                out[name] = list(out[name])
         return out
 
     @classmethod
@@ -201,15 +274,16 @@ class SensorConfig:
             raise UserError("a sensor configuration must be a table/object of parameters")
         check_keys(data, sorted(f.name for f in dataclasses.fields(cls)), "sensor parameter(s)")
         data = dict(data)
-        if isinstance(data.get("pulse_shape"), list):
-            data["pulse_shape"] = tuple(data["pulse_shape"])
+        for name in ("pulse_shape",) + ZONE_FIELDS:
+            if isinstance(data.get(name), list):
+                data[name] = tuple(data[name])
         try:
             return cls(**data)
         except TypeError as exc:  # pragma: no cover - defensive
             raise UserError(f"invalid sensor configuration: {exc}") from None
 
     def to_json(self, base: str | None = None) -> str:
-        """JSON text of :meth:`to_dict` (with ``base`` first when given: see :meth:`load`)."""
+        """JSON text of :meth:`to_dict` (with ``base`` first when given: see :func:`~nlosplan.sensor_models.presets.load_sensor_file`)."""
         data = self.to_dict() if base is None else {"base": base, **self.to_dict()}
         return json.dumps(data, indent=2)
 
@@ -223,7 +297,8 @@ class SensorConfig:
         return cls.from_dict(data)
 
     def to_toml(self, base: str | None = None) -> str:
-        """TOML text of :meth:`to_dict` (``pulse_shape`` omitted when unset; ``base`` first when given)."""
+        """TOML text of :meth:`to_dict` (unset optional fields such as ``pulse_shape`` omitted; ``base`` first when
+        given)."""
         import tomli_w
 
         data = {k: v for k, v in self.to_dict().items() if v is not None}
@@ -248,7 +323,8 @@ class SensorConfig:
         path : str or Path
         base : str, optional
             The preset this sensor refines, written as ``base`` so that fields
-            added to the model later take the preset's values (see :meth:`load`).
+            added to the model later take the preset's values (see
+            :func:`~nlosplan.sensor_models.presets.load_sensor_file`).
         """
         from nlosplan.files import write_text
 
@@ -318,3 +394,29 @@ def validate(cfg: SensorConfig) -> None:
         _check(len(cfg.pulse_shape) <= 512, "pulse_shape may have at most 512 samples")
     _check(isinstance(cfg.pileup, bool), f"pileup={cfg.pileup!r} must be true or false")
     _check(isinstance(cfg.saturation, bool), f"saturation={cfg.saturation!r} must be true or false")
+    for name in ZONE_FIELDS:
+        value = getattr(cfg, name)
+        if value is None:
+            continue
+        _check(len(value) == cfg.n_zones, f"{name} has {len(value)} values but the sensor has {cfg.n_zones} zones "
+                                          f"({cfg.zones_rows}x{cfg.zones_cols}); give one per zone, row-major")
+        if name == "zone_time_scales":
+            bad = [v for v in value if not 0.5 <= v <= 2.0]
+            if bad:
+                raise UserError(f"zone_time_scales must be between 0.5 and 2; got {bad[0]}")
+        elif name != "zone_time_offsets_ps":
+            bad = [v for v in value if v < 0]
+            if bad:
+                raise UserError(f"{name} must be >= 0; got {bad[0]}")
+    frac = _finite_number("pulse_tail_fraction", cfg.pulse_tail_fraction)
+    _check(0 <= frac < 1, f"pulse_tail_fraction={frac} is out of range; allowed: 0 <= fraction < 1")
+    decay = _finite_number("pulse_tail_decay_ps", cfg.pulse_tail_decay_ps)
+    _check(decay > 0, f"pulse_tail_decay_ps={decay} must be > 0 ps")
+    _check(frac == 0 or cfg.pulse_shape is not None,
+           "pulse_tail_fraction > 0 needs a pulse_shape (the tail continues the measured pulse after its last sample)")
+    walk = _finite_number("time_walk_ps", cfg.time_walk_ps)
+    _check(abs(walk) <= 1000, f"time_walk_ps={walk} is out of range; allowed: -1000 to 1000 ps per decade")
+    _integer("spads_per_zone", cfg.spads_per_zone, 1, 10**6)
+    if cfg.dead_time_ps is not None:
+        dead = _finite_number("dead_time_ps", cfg.dead_time_ps)
+        _check(dead > 0, f"dead_time_ps={dead} must be > 0 ps, or left out (blind for the rest of the iteration)")

@@ -9,6 +9,11 @@ Sources
   plane at 80 known distances (``../shared/data/tmf882x_distance``; method in
   :mod:`nlosplan.calibration.tmf882x_fit`): bin width, time offset, pulse
   shape, photon scale, ambient and dark rates. Figures in :data:`MEASURED`.
+- UNIT: the same captures fitted with every zone by the all-zone plane model
+  (``nlosplan calibrate``, :mod:`nlosplan.calibration.plane_fit`):
+  per-zone time offsets, time scales, gains and near-field overlap, first-photon
+  pile-up at the captures' iterations, time walk, pulse with its tail. Values of
+  that one unit (:data:`PLANE_UNIT`), given to ``tmf8828-3x3-short`` only.
 - DRV: the DENALI / cc-hardware driver constant for long range (260 ps bins).
 - ST: ST UM3183 and the cc-hardware VL53L8CH driver (compact normalised
   histograms: bins of ~37.5 mm = 250 ps, up to 32 bins, pulse ~10 bins wide).
@@ -23,7 +28,7 @@ from pathlib import Path
 
 from nlosplan.errors import UserError, check_keys
 from nlosplan.schema import load_table
-from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.config import ZONE_FIELDS, SensorConfig
 
 #: Values measured from ../shared/data/tmf882x_distance (TMF882x, 3x3, short
 #: range). Regenerate with ``nlosplan sensor fit-timebase PATH``.
@@ -45,6 +50,40 @@ MEASURED: dict = {
     "ambient_rate_hz": 3.2e6,
     "dark_rate_hz": 2.2e4,
 }
+
+
+PLANE_UNIT: dict = {
+    "bin_width_ps": 99.164,
+    "start_offset_ps": -1194.09,
+    "pulse_shape": [7e-06, 0.0, 0.019716, 0.311279, 0.312131, 0.165607, 0.067763, 0.032958, 0.022508, 0.016661, 0.012621, 0.009473, 0.007129, 0.005342, 0.004023, 0.003034, 0.002286, 0.001729, 0.001325, 0.001018, 0.00079, 0.00061, 0.000475, 0.000367, 0.000285, 0.000226, 0.000175, 0.000139, 0.000106, 8.7e-05, 7.3e-05, 5.7e-05],
+    "pulse_shape_t0_ps": -280.59,
+    "pulse_tail_fraction": 0.000501,
+    "pulse_tail_decay_ps": 1260.6,
+    "photon_scale": 0.3139,
+    "iterations": 4218414,
+    "time_walk_ps": 92.6,
+    "zone_time_offsets_ps": (-37.6, -55.7, -56.6, 0.6, 2.8, 39.2, 1.9, 55.5, 49.7),
+    "zone_time_scales": (0.9815, 0.9941, 0.9872, 1.0138, 1.0163, 0.9895, 0.9829, 1.0223, 1.0135),
+    "zone_gains": (0.668, 0.757, 1.148, 0.819, 1.095, 1.695, 0.793, 0.961, 1.486),
+    "zone_overlap_m": (0.0378, 0.062, 0.0623, 0.0583, 0.0934, 0.083, 0.0429, 0.0712, 0.0712),
+}
+#: How PLANE_UNIT was made and how well it predicts captures it did not see (docs/sensor-physics.md).
+PLANE_UNIT_NOTES = (
+    "UNIT: this 3x3 preset is the one TMF882x unit of ../shared/data/tmf882x_distance (80 captures of a plane, "
+    "the 69 at 6-40 cm fitted with 'nlosplan calibrate' all-zone model: per-zone time offsets, time scales, gains "
+    "and near-field overlap, first-photon pile-up at the captures' {iterations} iterations (the firmware's 4000 "
+    "kilo-iterations), time walk {walk} ps per decade of zone light, 32-sample pulse with an exponential tail). "
+    "{scores} The per-zone values are this unit's (and this mount's): another TMF8828 has its own, never take "
+    "them as facts for it; the 4x4, 8x8 and long-range presets do not carry them."
+)
+#: Held-out figures of the all-zone model on the plane captures (filled from 'nlosplan bench real').
+PLANE_UNIT_SCORES = (
+    "Held out by distance (5 folds, 'nlosplan bench real'), all 9 zones at 6-40 cm: sub-bin peak error 0.037 bin "
+    "mean, L1 of the shape 4.0 % mean / 10.5 % max, amplitude predicted/measured 0.97-1.12; fitted on these "
+    "captures and scored on the other public half (not shipped): 0.036 bin, 4.0 % / 10.1 %, 0.97-1.09. Jackknife "
+    "errors: bin width +-0.32 ps, offsets +-1-3 ps, time scales +-0.1-0.2 %, gains +-0.1-0.7 %, overlap +-0.5-1.8 mm, "
+    "iterations +-1.3 %."
+)
 
 
 def _tmf8828_short(rows: int, cols: int, fov: tuple[float, float], iterations: int, name: str) -> SensorConfig:
@@ -126,9 +165,28 @@ def _vl53l8ch() -> SensorConfig:
     )
 
 
+def _plane_unit_3x3() -> SensorConfig:
+    """The 3x3 short-range preset: the plane unit's fitted values (UNIT) on the DS geometry."""
+    u = PLANE_UNIT
+    base = _tmf8828_short(3, 3, (33.0, 32.0), u["iterations"], "tmf8828-3x3-short")
+    notes = PLANE_UNIT_NOTES.format(iterations=f"{u['iterations'] / 1e6:.2f}M", walk=f"{u['time_walk_ps']:g}",
+                                    scores=PLANE_UNIT_SCORES)
+    return base.replace(
+        bin_width_ps=u["bin_width_ps"], start_offset_ps=u["start_offset_ps"], pulse_shape=tuple(u["pulse_shape"]),
+        pulse_shape_step_ps=u["bin_width_ps"], pulse_shape_t0_ps=u["pulse_shape_t0_ps"], pulse_fwhm_ps=0.0,
+        pulse_tail_fraction=u["pulse_tail_fraction"], pulse_tail_decay_ps=u["pulse_tail_decay_ps"],
+        photon_scale=u["photon_scale"], ambient_rate_hz=MEASURED["ambient_rate_hz"] * 550_000 / u["iterations"],
+        dark_rate_hz=MEASURED["dark_rate_hz"] * 550_000 / u["iterations"], pileup=True,
+        time_walk_ps=u["time_walk_ps"], zone_time_offsets_ps=u["zone_time_offsets_ps"],
+        zone_time_scales=u["zone_time_scales"], zone_gains=u["zone_gains"], zone_overlap_m=u["zone_overlap_m"],
+        notes=(f"TMF8828 3x3 short range. Zones, 128 bins, 24-bit, FoV 33x32 deg, flash 30x32 deg FWHM: DS "
+               f"(550k iterations in the DS's default; this unit's captures used {u['iterations']}). "
+               + notes + " Ambient and dark rates: MEAS counts per bin at this unit's iterations."))
+
+
 def _builders() -> dict:
     return {
-        "tmf8828-3x3-short": lambda: _tmf8828_short(3, 3, (33.0, 32.0), 550_000, "tmf8828-3x3-short"),
+        "tmf8828-3x3-short": _plane_unit_3x3,
         "tmf8828-4x4-short": lambda: _tmf8828_short(4, 4, (41.0, 52.0), 550_000, "tmf8828-4x4-short"),
         "tmf8828-8x8-short": lambda: _tmf8828_short(8, 8, (41.0, 52.0), 125_000, "tmf8828-8x8-short"),
         "tmf8828-3x3-long": _tmf8828_3x3_long,
@@ -164,7 +222,9 @@ def preset(name: str) -> SensorConfig:
 
 
 #: Fields a sensor file without ``base`` may leave out (labels, and the optional measured pulse).
-OPTIONAL_FILE_FIELDS = ("name", "notes", "pulse_shape")
+#: Fields a complete sensor file may leave out: the labels, and the optional terms whose unset value (None) means
+#: "not modelled" (a measured pulse shape, per-zone terms, dead time), never a generic number.
+OPTIONAL_FILE_FIELDS = ("name", "notes") + tuple(f.name for f in dataclasses.fields(SensorConfig) if f.default is None)
 
 
 def load_sensor_file(path) -> SensorConfig:
@@ -196,8 +256,9 @@ def _from_table(data: dict, path: Path) -> SensorConfig:
     data = dict(data)
     base = data.pop("base", None)
     check_keys(data, ["base", *fields], "field(s)")
-    if isinstance(data.get("pulse_shape"), list):
-        data["pulse_shape"] = tuple(data["pulse_shape"])
+    for name in ("pulse_shape",) + ZONE_FIELDS:
+        if isinstance(data.get(name), list):
+            data[name] = tuple(data[name])
     if base is not None:
         if not isinstance(base, str) or base not in PRESET_NAMES:
             raise UserError(f"base = {base!r} is not a sensor preset; allowed: {', '.join(PRESET_NAMES)}")

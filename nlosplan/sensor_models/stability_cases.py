@@ -138,6 +138,36 @@ def _measured_pulse():
     return _ok(h) and abs(h.sum() - 3.0) < 1e-9, f"sum={h.sum():.12f} (expected 3)"
 
 
+def _zone_terms_extreme():
+    """Offsets beyond the window, gain 0, overlap 1 km, walk of 1000 ps/decade on 1e-30 light, tail 0.99."""
+    s = SensorConfig(zones_rows=1, zones_cols=4, pulse_shape=(0.2, 0.6, 0.2), pulse_shape_step_ps=100.0, iterations=10,
+                     saturation=False, zone_time_offsets_ps=(-1e6, 1e6, 0.0, 0.0), zone_gains=(1.0, 1.0, 0.0, 1.0),
+                     zone_overlap_m=(0.0, 0.0, 0.0, 1e3), time_walk_ps=1000.0, pulse_tail_fraction=0.99,
+                     pulse_tail_decay_ps=1e5, pileup=True, dead_time_ps=1.0)
+    t, w = np.full((4, 2), 5000.0), np.array([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0], [1e-30, 1.0]])
+    h = np.asarray(expected_histogram(s, t, w))
+
+    def total(g):
+        return expected_histogram(s.replace(zone_gains=(1.0, 1.0, 1.0, 1.0)), t, w * g)[3].sum()
+
+    grad = float(jax.grad(total)(1.0))
+    return _ok(h) and h[:2].sum() == 0 and h[2].sum() == 0 and math.isfinite(grad), \
+        f"sums per zone {np.round(h.sum(-1), 6).tolist()}, d/dgain {grad:.3g}"
+
+
+def _deadtime_regimes():
+    """DENALI-like floor (1e3 counts/bin at 550k): finite; dead time 0.01 bin to 1e6 bins; 1e6 SPADs."""
+    lam = np.full(128, 1e3 / 550_000)
+    lam[60] += 0.5
+    from nlosplan.sensor_models.counts import deadtime_expected
+
+    outs = [np.asarray(deadtime_expected(lam, 550_000.0, m, d)) for m, d in ((1, 0.01), (1, 1e6), (8, 5.0),
+                                                                              (10**6, None))]
+    shadow = outs[1][61:].mean() / outs[1][:59].mean()
+    return all(_ok(o) for o in outs) and shadow < 1.0, (f"floor {outs[1][:10].mean():.0f} counts/bin, after a 0.5 "
+                                                        f"photon return x{shadow:.3f}; 1e6 SPADs sum {outs[3].sum():.0f}")
+
+
 def _rejects(make, must_contain):
     def run():
         try:
@@ -167,6 +197,14 @@ CASES: list[Case] = [
     Case("gradients-finite", "gradients finite at sigma 0 and sigma > 0, impulses and boxes", _gradients),
     Case("jitter-on-histograms", "600 ps jitter on a central histogram conserves counts (1e-9)", _jitter_on_histograms),
     Case("measured-pulse", "sampled pulse shape + jitter conserves mass (1e-9)", _measured_pulse),
+    Case("zone-terms-extreme", "offsets beyond the window, gain 0, overlap 1 km, walk on 1e-30 light, tail 0.99, "
+         "1 ps dead time: finite, >= 0, lost zones exactly 0, finite gradient", _zone_terms_extreme),
+    Case("dead-time-regimes", "dead time 0.01 bin .. 1e6 bins, 1e6 SPADs, a 1e3 floor at 550k iterations: finite, "
+         "the floor shadowed after a return", _deadtime_regimes),
+    Case("reject-zone-list-length", "a per-zone list of the wrong length rejected, one line naming it",
+         _rejects(lambda: SensorConfig(zone_gains=(1.0, 2.0)), "zone_gains has 2 values")),
+    Case("reject-negative-dead-time", "a dead time <= 0 rejected", _rejects(lambda: SensorConfig(dead_time_ps=0.0),
+                                                                             "dead_time_ps")),
     Case("reject-negative-jitter", "negative jitter rejected, one line naming it",
          _rejects(lambda: SensorConfig(jitter_fwhm_ps=-1.0), "jitter_fwhm_ps")),
     Case("reject-zero-bins", "zero bins rejected, one line naming it", _rejects(lambda: SensorConfig(n_bins=0), "n_bins")),

@@ -263,3 +263,4 @@ def bin_nodes_without_irf(grid: TimeGrid, transient):
         return jnp.zeros(transient.shape[:-1] + (grid.n_bins,), transient.dtype)
     pad = [(0, 0)] * (per_bin.ndim - 1) + [(start - lo, lo + grid.n_bins - stop)]
     return jnp.pad(per_bin[..., start:stop], pad)
+

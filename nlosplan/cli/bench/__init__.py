@@ -1,7 +1,7 @@
 """``nlosplan bench``: benchmarks that print figures.
 
 ``histogram`` and ``simulate`` (histogram formation, the fast simulator) are
-here; ``rig`` (:mod:`.rig`) and ``fidelity``/``crossval`` (:mod:`.fidelity`)
+here; ``rig`` (:mod:`.rig`), ``live`` (:mod:`.live`) and ``fidelity``/``crossval`` (:mod:`.fidelity`)
 in their own modules.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from typing import Sequence
 
-from nlosplan.cli.bench import fidelity as fidelity_bench, rig as rig_bench
+from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, real as real_bench, rig as rig_bench
 
 from nlosplan.cli.dataset import _choices, _objects
 from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
@@ -201,6 +201,8 @@ def add(sub) -> None:
     bs.set_defaults(func=_cmd_bench_simulate)
     rig_bench.add_bench(bsub)
     fidelity_bench.add_bench(bsub)
+    live_bench.add_bench(bsub)
+    real_bench.add_bench(bsub)
 
 
 BENCH_SIMULATE_DESCRIPTION = """\

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+from contextlib import contextmanager
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, number_type, progress_bar
+from nlosplan.cli.common import emit, int_type, number_type, progress_bar, seed_type
 from nlosplan.errors import UserError
 
 EXAMPLES = {
@@ -17,6 +18,9 @@ EXAMPLES = {
         "nlosplan rig capture --emulate --plan raster --positions 0-9 --repeats 3 --store out/emu.db --json",
         "nlosplan rig capture --emulate --plan positions.csv --zones 8x8 --store out/emu.db "
         "--emulate-faults garble=40,drop=300",
+        "nlosplan rig capture --emulate lidar --gantry /dev/ttyUSB0 --home --positions 0-9 --store out/gantry.db",
+        "nlosplan rig capture --lidar /dev/ttyACM0 --gantry /dev/ttyACM1 --gantry-kind telemetrix "
+        "--rig-file denali-telemetrix.toml --store runs.db",
     ),
     "dry-run": (
         "nlosplan rig dry-run --plan raster --repeats 3",
@@ -198,22 +202,17 @@ def _run_id(args, spec: dict) -> str:
     if args.run:
         return args.run
     blob = json.dumps({"spec": spec, "object": args.object, "size": args.size, "lights": args.lights,
-                       "zones": args.zones, "range": args.range_mode, "emulated": args.emulate}, sort_keys=True)
+                       "zones": args.zones, "range": args.range_mode,
+                       "emulated": True if args.emulate == "both" else (args.emulate or False)}, sort_keys=True)
     kind = spec["kind"]
     return f"{kind}-{args.object}-{args.size}-{args.lights}-{args.zones}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
 
 
 def _cmd_capture(args) -> int:
     from nlosplan.hardware.executor import Executor, RunContext
-    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
-    from nlosplan.hardware.tmf8828 import SensorError
-    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
     from nlosplan.data.store import CaptureStore
 
-    if not args.emulate and not (args.lidar and args.gantry):
-        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
-    if args.emulate_faults and not args.emulate:
-        raise UserError("--emulate-faults needs --emulate")
+    devices = resolve_devices(args, seed_is_noise=True)
     args.sensor_config = _sensor_config(args)
     factory, desc, spec, total = _build_plan(args)
     rep = _dry(args, factory)
@@ -222,20 +221,18 @@ def _cmd_capture(args) -> int:
                         "(see 'nlosplan rig dry-run')")
     run_id = _run_id(args, spec)
     ctx = RunContext(args.object, args.size, class_group=args.class_group, lights=args.lights == "on",
-                     source="emulated:rig" if args.emulate else "rig", plan=desc, plan_total=total, plan_spec=spec)
+                     source="emulated:rig" if "lidar" in devices["emulate"] else "rig", plan=desc,
+                     plan_total=total, plan_spec=spec)
     pause = (lambda: Path(args.pause_file).exists()) if args.pause_file else None
-    summary = None
-    with CaptureStore(args.store) as store, _open(args) as rig, \
+    from nlosplan.cli.live import live_page
+
+    with live_page(args, "rig", args.store, run_id=run_id), rig_failures(run_id, args.store) as hold, \
+            CaptureStore(args.store) as store, _open(args, devices) as rig, \
             progress_bar(args, total, f"rig {run_id}", "capture") as bar:
-        ex = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
-                      on_capture=(lambda r: bar.update(1)) if bar is not None else None, pause_when=pause)
-        try:
-            summary = ex.run(factory())
-        except (GrblAlarm, GrblError, SensorError, ConnectionLost, DeviceTimeout) as exc:
-            s = ex.summary
-            raise UserError(f"run {run_id} stopped at step {max(s.steps - 1, 0)}: {exc}; {s.captured} new captures "
-                            f"stored ({s.resumed} found stored); fix it and rerun the same command to resume "
-                            f"[{'; '.join(s.finalize)}]") from None
+        ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
+                                         on_capture=(lambda r: bar.update(1)) if bar is not None else None,
+                                         pause_when=pause)
+        summary = ex.run(factory())
     data = {"store": str(args.store), **summary.to_dict()}
     text = (f"run {run_id}: {summary.captured} captured, {summary.resumed} already stored, {summary.moves} moves, "
             f"{summary.retries} retries in {summary.seconds:.1f} s -> {args.store}\n"
@@ -246,38 +243,145 @@ def _cmd_capture(args) -> int:
     return 0
 
 
-def _open(args):
-    from contextlib import contextmanager
+@contextmanager
+def rig_failures(run_id: str, store_path):
+    """One line (exit 2) for whatever ends a rig run: a device failure at open or during the run, a full disk.
 
+    Ctrl-C stays an interrupt (exit 130) with the same line. Each line says what finalize did (sensor stopped?
+    gantry parked? where?). Yields a dict: put the :class:`Executor` under ``"executor"`` once the rig is open.
+    """
+    import errno
+    import sqlite3
+
+    from nlosplan.hardware.rig import device_errors
+
+    hold: dict = {}
+
+    def where() -> str:
+        ex = hold.get("executor")
+        if ex is None:
+            return "the rig did not open: nothing moved, nothing was captured"
+        s = ex.summary
+        return (f"stopped at step {max(s.steps - 1, 0)}: {s.captured} new captures stored ({s.resumed} found "
+                f"stored); finalize: {'; '.join(s.finalize) or 'not run'}")
+
+    try:
+        yield hold
+    except UserError as exc:
+        if hold.get("executor") is None:
+            raise
+        raise UserError(f"run {run_id} {where()}: {exc}") from None
+    except device_errors() as exc:
+        hint = "rerun the same command to resume"
+        if type(exc).__name__ == "GrblAlarm":
+            hint = "clear the cause and rerun the same command with --unlock or --home to resume"
+        raise UserError(f"run {run_id}: {exc}; {where()}; {hint}") from None
+    except (sqlite3.Error, OSError) as exc:
+        full = "full" in str(exc) or getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT)
+        what = (f"capture store {store_path}: {exc}" if isinstance(exc, sqlite3.Error) or full
+                else f"{type(exc).__name__}: {exc}")
+        todo = "free space and rerun the same command to resume" if full else "rerun the same command to resume"
+        raise UserError(f"run {run_id}: {what}{' (disk full; the captures committed before are kept)' if full else ''}"
+                        f"; {where()}; {todo}") from None
+    except KeyboardInterrupt:
+        raise KeyboardInterrupt(f"run {run_id} {where()}; rerun the same command to resume") from None
+
+
+def _faults_for(kind: str, faults: dict):
+    from nlosplan.hardware.emulators import GantryFaults, SensorFaults
+
+    cls = SensorFaults if kind == "lidar" else GantryFaults
+    floats = {"slow_answer_s", "slow_ok_s"}
+    got = {k: (v if k in floats else int(v)) for k, v in faults.items() if k in cls.__dataclass_fields__}
+    return cls(**got) if got else None
+
+
+def resolve_devices(args, *, seed_is_noise: bool) -> dict:
+    """Which device is real (on which port) and which emulated; every flag that does not apply is refused.
+
+    ``--emulate`` alone means both devices; ``--emulate lidar`` or ``--emulate gantry`` one of them.
+    """
+    emulate = {"both": ("lidar", "gantry"), "lidar": ("lidar",), "gantry": ("gantry",), None: ()}[args.emulate]
+    if not emulate and not (args.lidar or args.gantry):
+        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
+    for dev in ("lidar", "gantry"):
+        port = getattr(args, dev)
+        if dev in emulate and port:
+            raise UserError(f"--{dev} {port} and --emulate {args.emulate} both name the {dev}: drop one")
+        if dev not in emulate and not port:
+            raise UserError(f"give --{dev} PORT for the real {dev}, or --emulate {dev} (or --emulate for both)")
+    if args.baud is not None and "lidar" in emulate:
+        raise UserError("--baud is the real TMF8828's baud rate; the emulated sensor needs none")
+    if args.time_scale is not None and "gantry" not in emulate:
+        raise UserError("--time-scale speeds up an emulated gantry; the gantry here is real")
+    if seed_is_noise and args.seed is not None and "lidar" not in emulate:
+        raise UserError("--seed seeds the emulated sensor's noise; the sensor here is real")
+    faults = getattr(args, "emulate_faults", None) or {}
+    sensor_keys = {k for k in faults if k in ("garble_every", "truncate_every", "drop_every",
+                                              "disconnect_after_frames", "slow_answer_s")}
+    if faults and not emulate:
+        raise UserError("--emulate-faults needs --emulate")
+    if sensor_keys and "lidar" not in emulate:
+        raise UserError(f"--emulate-faults {', '.join(sorted(sensor_keys))}: sensor faults need an emulated sensor")
+    if set(faults) - sensor_keys and "gantry" not in emulate:
+        raise UserError("--emulate-faults alarm/slow-ok are gantry faults and need an emulated gantry")
+    kind = args.gantry_kind
+    if kind == "auto" and "gantry" in emulate:
+        raise UserError("--gantry-kind auto probes a real port; with an emulated gantry say grbl or telemetrix")
+    if args.rig_file and kind == "grbl":
+        raise UserError("--rig-file describes a Telemetrix gantry; add --gantry-kind telemetrix (or auto)")
+    if kind == "telemetrix" and (args.home or args.unlock):
+        raise UserError("--home and --unlock are GRBL's; a Telemetrix gantry has no limit switches and no alarm lock")
+    if kind == "telemetrix" and args.work_offset != "auto":
+        raise UserError("--work-offset is GRBL's; a Telemetrix gantry's origin is origin_mm in its --rig-file")
+    from nlosplan.hardware.grbl_frame import parse_work_offset
+    from nlosplan.hardware.telemetrix_config import load_rig_file
+
+    return {"emulate": emulate, "lidar": args.lidar, "gantry": args.gantry, "gantry_kind": kind,
+            "telemetrix": load_rig_file(args.rig_file) if args.rig_file else None,
+            "work_offset": parse_work_offset(args.work_offset),
+            "sensor_faults": _faults_for("lidar", faults), "gantry_faults": _faults_for("gantry", faults)}
+
+
+def _open(args, devices: dict):
+    """The rig of the command line (:func:`nlosplan.hardware.rig.rig_session`), a context manager."""
     from nlosplan.hardware.lights import FixedLights
-    from nlosplan.hardware.rig import emulated_rig, open_rig
+    from nlosplan.hardware.rig import rig_session
 
     park = None if args.no_park else (args.limits[0][0], args.limits[1][0])
-    if args.emulate:
-        from nlosplan.hardware.emulators import GantryFaults, SensorFaults
+    return rig_session(**devices, zones=args.zones, range_mode=args.range_mode,
+                       baudrate=args.baud or 2_000_000, sensor_config=args.sensor_config, limits_mm=args.limits,
+                       feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"), lights_on=args.lights == "on",
+                       home=args.home, unlock=args.unlock, park_mm=park, obj=args.object, size=args.size,
+                       seed=args.seed or 0, time_scale=args.time_scale or 20.0)
 
-        f = args.emulate_faults or {}
-        sf = SensorFaults(**{k: (int(v) if k != "slow_answer_s" else v) for k, v in f.items()
-                             if k in SensorFaults.__dataclass_fields__})
-        gf = GantryFaults(**{k: (int(v) if k != "slow_ok_s" else v) for k, v in f.items()
-                             if k in GantryFaults.__dataclass_fields__})
-        return emulated_rig(obj=args.object, size=args.size, zones=args.zones, range_mode=args.range_mode,
-                            lights=args.lights == "on", seed=args.seed, time_scale=args.time_scale,
-                            sensor_faults=sf, gantry_faults=gf, limits_mm=args.limits, feed_mm_min=args.feed,
-                            park_mm=park, home=args.home, unlock=args.unlock, sensor_config=args.sensor_config)
 
-    @contextmanager
-    def real():
-        rig = open_rig(args.lidar, args.gantry, zones=args.zones, range_mode=args.range_mode, baudrate=args.baud,
-                       sensor_config=args.sensor_config,
-                       limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
-                       home=args.home, unlock=args.unlock, park_mm=park)
-        try:
-            yield rig
-        finally:
-            rig.close()
-
-    return real()
+def add_device_options(p: argparse.ArgumentParser, *, seed_help: str) -> None:
+    """The devices: real ports or emulators, the gantry's kind and set-up (shared by capture and run)."""
+    p.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port (or pyserial URL)")
+    p.add_argument("--gantry", metavar="PORT", help="gantry serial port (or pyserial URL)")
+    p.add_argument("--emulate", nargs="?", const="both", default=None, choices=["lidar", "gantry", "both"],
+                   help="pty emulators (same driver code): alone both devices, or only 'lidar' or 'gantry' "
+                        "(the other one real)")
+    p.add_argument("--gantry-kind", default="grbl", choices=["grbl", "telemetrix", "auto"],
+                   help="gantry firmware: GRBL 1.1, Telemetrix4Arduino (DENALI's rig), or auto (probe which "
+                        "answers) (default: grbl)")
+    p.add_argument("--rig-file", default=None, metavar="TOML",
+                   help="Telemetrix gantry: pins, steps/mm, speed, acceleration, flips, origin "
+                        "(default: DENALI's values; see docs/rig-connect.md)")
+    p.add_argument("--work-offset", default="auto", metavar="auto|keep|X,Y",
+                   help="GRBL: how plan coordinates map onto machine coordinates: auto (G54 set so the limits fit "
+                        "GRBL's machine space), keep (the controller's active offset) or X,Y (G54, mm) "
+                        "(default: auto)")
+    p.add_argument("--baud", type=int, default=None, choices=[115200, 1_000_000, 2_000_000],
+                   help="real TMF8828's firmware baud rate (default: 2000000, DENALI's)")
+    p.add_argument("--home", action="store_true", help="GRBL: home the gantry ($H) before the run")
+    p.add_argument("--unlock", action="store_true",
+                   help="GRBL: clear an alarm with $X (after ALARM:1/2 a soft reset first); only if you know "
+                        "where it is")
+    p.add_argument("--seed", type=seed_type(), default=None, help=seed_help)
+    p.add_argument("--time-scale", type=number_type(float), default=None,
+                   help="emulated gantry: motion runs this much faster (default: 20)")
 
 
 def _cmd_status(args) -> int:
@@ -302,33 +406,28 @@ def add(sub):
     """The ``rig`` group with ``capture``, ``dry-run`` and ``status``; returns the group's subparsers."""
     from nlosplan.cli.common import command_group
 
-    rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL gantry), or its pty emulators",
-                         "Drive the capture rig: a TMF8828 on the ams Arduino firmware and a GRBL 1.1 gantry, "
-                         "or, with --emulate, pty emulators of both backed by the fast simulator.")
+    rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL or Telemetrix gantry), or emulators",
+                         "Drive the capture rig: a TMF8828 on the ams Arduino firmware and a gantry on GRBL 1.1 or "
+                         "Telemetrix4Arduino, or, with --emulate, pty emulators of either or both (the sensor's "
+                         "backed by the fast simulator). Set-up and every error: docs/rig-connect.md.")
     c = _sub(rsub, "capture", "run a capture plan, every capture stored once (rerun the same command to resume)",
              CAPTURE_DESCRIPTION)
-    c.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port (or pyserial URL)")
-    c.add_argument("--gantry", metavar="PORT", help="GRBL serial port (or pyserial URL)")
-    c.add_argument("--emulate", action="store_true", help="run on pty emulators of both devices (same driver code)")
+    add_device_options(c, seed_help="emulated sensor: noise seed (default: 0)")
     c.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
     c.add_argument("--run", default=None, help="run id (default: derived from the plan and labels, so a rerun resumes)")
     _plan_options(c)
     c.add_argument("--class-group", default=None, help="class group of a non-DENALI object")
     c.add_argument("--lights", default="off", choices=["on", "off"], help="room lights during the run (default: off)")
-    c.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
-                   help="TMF8828 firmware baud rate (default: 2000000, DENALI's)")
-    c.add_argument("--home", action="store_true", help="home the gantry ($H) before the run")
-    c.add_argument("--unlock", action="store_true", help="clear a gantry alarm with $X (only if you know where it is)")
     c.add_argument("--no-park", action="store_true", help="do not park the gantry at the limits' minimum at the end")
     c.add_argument("--no-view-check", action="store_true",
                    help="skip the check that the object never enters the LiDAR's direct view (DENALI geometry)")
     c.add_argument("--pause-file", default=None, metavar="PATH",
                    help="pause at the next position while this file exists")
-    c.add_argument("--seed", type=int, default=0, help="--emulate: noise seed (default: 0)")
-    c.add_argument("--time-scale", type=number_type(float), default=20.0,
-                   help="--emulate: emulated motion runs this much faster (default: 20)")
     c.add_argument("--emulate-faults", type=_faults, default=None, metavar="K=V,...",
                    help=f"--emulate: inject faults ({', '.join(FAULT_KEYS)}), e.g. garble=40,drop=300,disconnect=5")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(c, "the run (rig map, last histograms, captures, faults)")
     c.set_defaults(func=_cmd_capture)
     d = _sub(rsub, "dry-run", "list a plan's moves and check limits and direct view before anything moves")
     _plan_options(d)
@@ -344,12 +443,16 @@ def add(sub):
 
 CAPTURE_DESCRIPTION = """\
 Run a capture plan on the rig and store every capture (one SQLite transaction
-each, with run id, step, commanded and reported gantry position, sensor and
-firmware configuration, timestamps, lights, repeat). The plan is checked dry
-first (limits, object never in the LiDAR's direct view); nothing moves if it
-fails. The sensor is stopped and the gantry parked at the end, also on errors
-and Ctrl-C. Rerunning the same command resumes the run: stored captures are
-skipped, nothing is taken twice. A lost sensor link is reconnected and the
+each, with run id, step, commanded and reported gantry position in the plan's
+frame plus the controller's raw position, sensor and firmware configuration,
+timestamps, lights, repeat). The plan is checked dry first (limits, object
+never in the LiDAR's direct view) and the gantry's own limits at open (GRBL's
+machine space and work offset); nothing moves if a check fails. The sensor is
+stopped and the gantry parked at the end, also on errors and Ctrl-C, and the
+last line says so. Rerunning the same command resumes the run: stored captures
+are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
---home). With --emulate, both devices are pty emulators (DENALI scene, fast
-simulator) driven by the same code; motion runs --time-scale times faster."""
+--home). --emulate runs both devices as pty emulators (DENALI scene, fast
+simulator) driven by the same code, --emulate lidar or --emulate gantry one of
+them; emulated motion runs --time-scale times faster. docs/rig-connect.md: set-up
+and every error line."""

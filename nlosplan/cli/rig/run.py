@@ -10,6 +10,7 @@ from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, number_type
 from nlosplan.errors import UserError
+from nlosplan.files import write_json
 
 EXAMPLES = (
     "nlosplan rig run --emulate --planner active --budget 40 --target-rmse 0.05 --store out/loop.db",
@@ -33,55 +34,100 @@ captures are fed back and the deterministic planner repeats its choices).
 --target-rmse stops when the cross-validated localization RMSE of the
 ensemble over the captures reaches it. --approve shows each batch (table,
 and a PNG of the positions in --out) and waits for 'y' before anything
-moves; any other answer ends the run. The planner's JSON checkpoint and the
-progress are written to --out."""
+moves; any other answer ends the run. With --live the batch can also be
+approved, edited (drop or add positions on the map) or refused on the live
+page (the first answer wins; the page needs the token of the printed URL).
+Every answer is logged in --out (approvals.jsonl); a rerun runs the batches
+approved before as they were approved (edits included) and asks again from
+the first batch that was not.
+The planner's JSON checkpoint and the progress are written to --out."""
 
 
 def _run_id(args) -> str:
     if args.run:
         return args.run
-    blob = json.dumps({k: getattr(args, k) for k in ("planner", "budget", "batch", "grid", "seed", "object", "size",
-                                                     "zones", "range_mode", "repeats", "emulate")}, sort_keys=True)
+    keys = ("planner", "budget", "batch", "grid", "seed", "object", "size", "zones", "range_mode", "repeats")
+    blob = json.dumps({**{k: getattr(args, k) for k in keys},
+                       "emulate": True if args.emulate == "both" else (args.emulate or False)}, sort_keys=True)
     return f"plan-{args.planner}-{args.object}-{args.size}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}"
 
 
-def _approver(args, out: Path):
+def _approver(args, out: Path, run_id: str):
+    from nlosplan.cli.live import ask_approval
+    from nlosplan.planner.capture.approval import close_request, given_approval, post_request
     from nlosplan.reports.capture_plan_plot import batch_table, plot_batch
 
-    def approve(batch, planner) -> bool:
-        k = sum(1 for f in out.glob("batch_*.png"))
+    live = args.live is not None
+    asked = [0]
+
+    def approve(batch, planner):
+        k = asked[0]
+        asked[0] += 1
         png = plot_batch(batch, planner.space.points_mm, planner.space.points_mm[planner.captured],
                          planner.position_mm, out / f"batch_{k:03d}.png",
                          title=f"{planner.config.strategy}: batch of {len(batch)}")
         print(f"proposed batch ({len(planner.observations)} captured so far); plot: {png}\n{batch_table(batch)}",
               file=sys.stderr, flush=True)
-        print(f"move the gantry to these {len(batch)} positions? [y/N] ", end="", file=sys.stderr, flush=True)
-        answer = sys.stdin.readline().strip().lower()
-        return answer in ("y", "yes")
+        ids = [p["id"] for p in batch]
+        budget = planner.config.budget
+        left = None if budget is None else int(budget) - len(planner.observations) - sum(
+            p["status"] == "pending" for p in planner.proposals.values())
+        where = [(p["x_mm"], p["y_mm"]) for p in batch]
+        before = given_approval(out, run_id, k, ids, where)
+        if before is not None:   # a rerun resumes: the batch was approved then (by whom, when: approvals.jsonl)
+            print(f"batch {k} was approved by the {before['answered_by']} at {before['answered_utc']}"
+                  + (" with edits" if before["drop"] or before["add"] else "") + ": running it again as approved",
+                  file=sys.stderr, flush=True)
+            return {"drop": before["drop"], "add": before["add"]} if before["drop"] or before["add"] else True
+        while True:   # until an answer the planner can run (an edit from the page is checked first)
+            req = post_request(out, run_id=run_id, batch=k, ids=ids, positions=where, budget_left=left)
+            print(f"move the gantry to these {len(batch)} positions? [y/N] " + ("(or answer on the live page) "
+                                                                              if live else ""),
+                  end="", file=sys.stderr, flush=True)
+            answer = ask_approval(req, out, live=live)
+            if answer.decision == "approve" and answer.edited:
+                try:
+                    planner.amend(ids, drop=answer.drop, add=answer.add, check_only=True)
+                except UserError as exc:
+                    close_request(out, req, answer, note=f"not run: {exc}")
+                    print(f"\nthe edited batch cannot run: {exc}; asking again", file=sys.stderr, flush=True)
+                    continue
+                close_request(out, req, answer)
+                return {"drop": list(answer.drop), "add": list(answer.add)}
+            close_request(out, req, answer)
+            return answer.decision == "approve"
 
     return approve
 
 
 def _cmd(args) -> int:
-    from nlosplan.cli.rig.capture import _open
+    from nlosplan.cli.live import live_page
+    from nlosplan.cli.rig.capture import resolve_devices
+
+    devices = resolve_devices(args, seed_is_noise=False)
+    args.seed = 0 if args.seed is None else args.seed
+    if args.lights == "on":
+        raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
+    out = Path(args.out)
+    run_id = _run_id(args)
+    with live_page(args, "rig", args.store, planner_dir=out, run_id=run_id, actions=args.approve):
+        out.mkdir(parents=True, exist_ok=True)
+        return _loop(args, devices, out, run_id)
+
+
+def _loop(args, devices: dict, out: Path, run_id: str) -> int:
+    from nlosplan.cli.rig.capture import _open, rig_failures
     from nlosplan.hardware.executor import Executor, RunContext
-    from nlosplan.hardware.grbl_protocol import GrblAlarm, GrblError
     from nlosplan.hardware.plans import ask_tell_plan
     from nlosplan.hardware.rig import sensor_preset
-    from nlosplan.hardware.tmf8828 import SensorError
-    from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
     from nlosplan.planner.capture import (CapturePlanner, MotionModel, PlannerConfig, build_space, denali_scene_fn,
                                           grid_points, screen_candidates)
     from nlosplan.planner.capture.closed_loop import ClosedLoop
     from nlosplan.data.store import CaptureStore
 
-    if not args.emulate and not (args.lidar and args.gantry):
-        raise UserError("give --lidar PORT and --gantry PORT, or --emulate")
-    if args.lights == "on":
-        raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    sensor = sensor_preset(args.zones, args.range_mode)
+    # the capture planner's counts model is linear and alike in every zone: the preset without its pile-up and
+    # per-zone calibration terms (those serve the realism checks, 'nlosplan bench real')
+    sensor = sensor_preset(args.zones, args.range_mode).linear_uniform()
     scene_fn = denali_scene_fn(args.object, args.size, "off")
     (x0, x1), (y0, y1) = args.limits
     cand = screen_candidates(grid_points(args.grid, args.grid, (x0, x1), (y0, y1)), limits=args.limits,
@@ -102,31 +148,26 @@ def _cmd(args) -> int:
                   f"{[round(v, 4) for v in row['calibration_theta']]}", file=sys.stderr, flush=True)
 
     loop = ClosedLoop(planner, target_rmse_m=args.target_rmse, checkpoint=out / "planner.json",
-                      approve=_approver(args, out) if args.approve else None, on_batch=report)
-    run_id = _run_id(args)
-    ctx = RunContext(args.object, args.size, lights=False, source="emulated:rig" if args.emulate else "rig",
+                      approve=_approver(args, out, run_id) if args.approve else None, on_batch=report)
+    ctx = RunContext(args.object, args.size, lights=False,
+                     source="emulated:rig" if "lidar" in devices["emulate"] else "rig",
                      plan=f"planner {args.planner}, budget {args.budget}, batches of {args.batch}",
                      plan_spec={"kind": "planner", "planner": args.planner, "budget": args.budget,
                                 "batch": args.batch, "grid": args.grid, "seed": args.seed})
     plan = ask_tell_plan(loop.suggest, loop.ingest, batch=args.batch, repeats=args.repeats, settle_s=args.settle,
                          max_positions=args.budget)
     # what the rig CLI's opener (nlosplan.cli.rig.capture._open) reads besides the options above
-    args.emulate_faults, args.no_park, args.sensor_config = None, False, sensor
-    with CaptureStore(args.store) as store, _open(args) as rig:
-        ex = Executor(rig, store, run_id=run_id, context=ctx)
-        try:
-            summary = ex.run(plan)
-        except (GrblAlarm, GrblError, SensorError, ConnectionLost, DeviceTimeout) as exc:
-            s = ex.summary
-            raise UserError(f"run {run_id} stopped at step {max(s.steps - 1, 0)}: {exc}; {s.captured} new captures "
-                            "stored; fix it and rerun the same command to resume") from None
+    args.no_park, args.sensor_config = False, sensor
+    with rig_failures(run_id, args.store) as hold, CaptureStore(args.store) as store, _open(args, devices) as rig:
+        ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx)
+        summary = ex.run(plan)
     best = planner.best()
     result = {"run_id": run_id, "store": str(args.store), "planner": best, "history": loop.history,
               "executor": summary.to_dict(), "checkpoint": str(out / "planner.json"),
               "excluded": cand.excluded,
               "finished": planner.finished or (f"budget of {args.budget} positions spent"
                                                if best["captures"] >= args.budget else "plan ended")}
-    (out / "rig_run.json").write_text(json.dumps(result, indent=1, default=float), encoding="utf-8")
+    write_json(out / "rig_run.json", result, indent=1, default=float)
     last = loop.history[-1] if loop.history else None
     cv = "n/a" if not last or last["cv_rmse_m"] == float("inf") else f"{1e3 * last['cv_rmse_m']:.1f} mm"
     text = (f"run {run_id}: {best['captures']} positions captured ({summary.captured} captures stored, "
@@ -142,7 +183,7 @@ def _cmd(args) -> int:
 
 def add_rig(rsub) -> None:
     """Register ``nlosplan rig run``."""
-    from nlosplan.cli.rig.capture import add_mode_options, add_motion_options
+    from nlosplan.cli.rig.capture import add_device_options, add_mode_options, add_motion_options
     from nlosplan.planner.capture import STRATEGIES
 
     p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",
@@ -156,10 +197,9 @@ def add_rig(rsub) -> None:
     p.add_argument("--batch", type=int_type(1, 100), default=5, metavar="N", help="positions per batch (default: 5)")
     p.add_argument("--grid", type=int_type(2, 41), default=19, metavar="N",
                    help="candidate lattice N x N over the limits (default: 19)")
-    p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves")
-    p.add_argument("--lidar", metavar="PORT", help="TMF8828 serial port")
-    p.add_argument("--gantry", metavar="PORT", help="GRBL serial port")
-    p.add_argument("--emulate", action="store_true", help="pty emulators of both devices (same driver code)")
+    p.add_argument("--approve", action="store_true", help="show each batch and wait for 'y' before anything moves "
+                                                          "(with --live: or for an answer on the page)")
+    add_device_options(p, seed_help="planner seed, and the emulated sensor's noise seed (default: 0)")
     p.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
     p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
     p.add_argument("--out", default="nlosplan-out/rig-run", metavar="DIR",
@@ -169,13 +209,10 @@ def add_rig(rsub) -> None:
     p.add_argument("--size", default="8in", choices=["4in", "8in"], help="object size (default: 8in)")
     add_mode_options(p)
     p.add_argument("--lights", default="off", choices=["off", "on"], help="room lights (off only, for now)")
-    p.add_argument("--baud", type=int, default=2_000_000, choices=[115200, 1_000_000, 2_000_000],
-                   help="TMF8828 firmware baud rate (default: 2000000)")
-    p.add_argument("--home", action="store_true", help="home the gantry ($H) first")
-    p.add_argument("--unlock", action="store_true", help="clear a gantry alarm with $X")
-    p.add_argument("--seed", type=int, default=0, help="planner seed (and --emulate noise seed) (default: 0)")
-    p.add_argument("--time-scale", type=number_type(float), default=20.0,
-                   help="--emulate: emulated motion runs this much faster (default: 20)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    from nlosplan.cli.live import add_live_option
+
+    add_live_option(p, "the run (rig map with the proposed route, histograms, RMSE, calibration; with --approve "
+                       "the batch is approved, edited or refused on the page)")
     p.set_defaults(func=_cmd)

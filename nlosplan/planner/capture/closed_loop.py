@@ -51,9 +51,12 @@ class ClosedLoop:
     target_rmse_m : float, optional
         Stop when the cross-validated localization RMSE reaches it.
     approve : callable, optional
-        ``approve(batch, planner) -> bool`` before anything moves; False stops the loop.
+        ``approve(batch, planner)`` before anything moves: True runs the batch, False stops the
+        loop, a dict ``{"drop": [ids], "add": [candidate indices]}`` runs the batch so edited
+        (:meth:`CapturePlanner.amend`).
     checkpoint : path, optional
-        The planner's JSON checkpoint, written after every batch.
+        The planner's JSON checkpoint with the loop's history (``loop``), written after every
+        suggestion (the pending batch) and every ingest.
     on_batch : callable, optional
         Called with each history row.
     """
@@ -69,15 +72,27 @@ class ClosedLoop:
         self.history: list[dict] = []
         self._pending: list[dict] = []
 
+    def save(self) -> None:
+        """Write the checkpoint (when one is set): the planner's state and ``loop`` (target, history)."""
+        if self.checkpoint is not None:
+            self.planner.save(self.checkpoint, extra={"loop": {"target_rmse_m": self.target,
+                                                               "history": self.history}})
+
     def suggest(self, n: int) -> list[tuple[float, float]]:
         """The next batch as (x_mm, y_mm) in route order; empty ends the plan."""
         batch = self.planner.suggest(n)
-        if batch and self.approve is not None and not self.approve(batch, self.planner):
+        if batch:
+            self.save()
+        verdict = True if not batch or self.approve is None else self.approve(batch, self.planner)
+        if isinstance(verdict, dict):
+            batch = self.planner.amend([p["id"] for p in batch], drop=verdict.get("drop", ()),
+                                       add=verdict.get("add", ()))
+            self.save()
+        elif not verdict:
             self.planner.stop("batch not approved")
             for p in batch:
                 self.planner.proposals[p["id"]]["status"] = "rejected"
-            if self.checkpoint is not None:
-                self.planner.save(self.checkpoint)
+            self.save()
             return []
         self._pending = batch
         return [(p["x_mm"], p["y_mm"]) for p in batch]
@@ -107,7 +122,6 @@ class ClosedLoop:
         if self.target is not None and row["cv_rmse_m"] <= self.target:
             self.planner.stop(f"target reached: cross-validated RMSE {1e3 * row['cv_rmse_m']:.1f} mm "
                               f"<= {1e3 * self.target:g} mm")
-        if self.checkpoint is not None:
-            self.planner.save(self.checkpoint)
+        self.save()
         if self.on_batch:
             self.on_batch(row)

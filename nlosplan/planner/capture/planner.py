@@ -248,6 +248,81 @@ class CapturePlanner:
                 self.position_mm = np.array([prop["x_mm"], prop["y_mm"]])
         self._calib = self._localizer = None
 
+    def amend(self, ids, *, drop=(), add=(), check_only: bool = False) -> list[dict]:
+        """Edit a pending batch before it runs (the approval gate): drop proposals, add candidates.
+
+        Parameters
+        ----------
+        ids : sequence of str
+            The ids of the pending batch, as :meth:`suggest` returned it.
+        drop : sequence of str
+            Ids of the batch not to capture: their status becomes ``"dropped"``
+            (not a failure; the candidate may be proposed again).
+        add : sequence of int
+            Candidate indices to capture as well: free candidates only (not
+            captured, not pending, not given up), within the budget left.
+        check_only : bool
+            Only check the edit (raise if it is not allowed); change nothing, return [].
+
+        Returns
+        -------
+        list of dict
+            The edited batch, route-ordered from the current gantry position,
+            in :meth:`suggest`'s form (new ids for the added candidates).
+
+        Raises
+        ------
+        UserError
+            An id not in the batch, an index that is not a free candidate, more
+            positions than the budget allows, or nothing left to capture.
+        """
+        ids, drop = [str(i) for i in ids], [str(i) for i in drop]
+        add = [int(i) for i in add]
+        for pid in ids:
+            if self.proposals.get(pid, {}).get("status") != "pending":
+                raise UserError(f"capture id {pid!r} is not a pending proposal of this planner")
+        bad = [pid for pid in drop if pid not in ids]
+        if bad:
+            raise UserError(f"cannot drop {', '.join(bad)}: not in the batch ({', '.join(ids)})")
+        if len(set(add)) != len(add):
+            raise UserError("a candidate is added twice")
+        allowed = self._allowed()
+        for i in add:
+            if not 0 <= i < self.space.size:
+                raise UserError(f"candidate {i} does not exist (0..{self.space.size - 1})")
+            if not allowed[i]:
+                raise UserError(f"candidate {i} at ({self.space.points_mm[i, 0]:g}, {self.space.points_mm[i, 1]:g}) mm "
+                                "is not free (captured, proposed, given up, or off the raster)")
+        kept = [pid for pid in ids if pid not in drop]
+        if self.config.budget is not None:
+            pending = sum(p["status"] == "pending" for p in self.proposals.values()) - len(drop)
+            left = int(self.config.budget) - len(self.observations) - pending
+            if len(add) > left:
+                raise UserError(f"{len(add)} positions added but the budget leaves room for {max(left, 0)} more")
+        if not kept and not add:
+            raise UserError("the edited batch is empty; refuse the batch instead")
+        if check_only:
+            return []
+        for pid in drop:
+            self.proposals[pid]["status"] = "dropped"
+        for i in add:
+            pid = f"c{self._next:05d}"
+            self._next += 1
+            self.proposals[pid] = {"id": pid, "index": i, "x_mm": float(self.space.points_mm[i, 0]),
+                                   "y_mm": float(self.space.points_mm[i, 1]),
+                                   "label_xy": self.space.labels_xy[i].tolist(), "status": "pending",
+                                   "batch_order": 0, "added": True}
+            kept.append(pid)
+        pts = np.array([[self.proposals[p]["x_mm"], self.proposals[p]["y_mm"]] for p in kept])
+        if self.config.strategy != "raster" or add:
+            order, _, _ = order_batch(self.position_mm, pts, self.config.motion)
+            kept = [kept[i] for i in order]
+        out = []
+        for k, pid in enumerate(kept):
+            self.proposals[pid]["batch_order"] = k
+            out.append({k2: v for k2, v in self.proposals[pid].items() if k2 != "status"})
+        return out
+
     def stop(self, reason: str) -> None:
         """Propose nothing more (e.g. the target was reached)."""
         self.finished = str(reason)
@@ -267,7 +342,8 @@ class CapturePlanner:
         """Everything needed to resume, as JSON-ready data."""
         return {"format": CHECKPOINT_FORMAT, "config": self.config.to_dict(),
                 "space": {"fingerprint": self.space.fingerprint(), "candidates": self.space.size,
-                          "meta": self.space.meta},
+                          "meta": self.space.meta, "points_mm": np.round(self.space.points_mm, 4).tolist(),
+                          "excluded": list(self.space.excluded)},
                 "rng": self.rng.bit_generator.state, "next_id": self._next,
                 "position_mm": self.position_mm.tolist(), "gantry_seconds": self.gantry_seconds,
                 "finished": self.finished, "proposals": list(self.proposals.values()),
@@ -275,9 +351,12 @@ class CapturePlanner:
                                  for o in self.observations],
                 "failures": self.failures}
 
-    def save(self, path) -> Path:
-        """Write :meth:`state_dict` to ``path`` atomically (a temporary file, then rename)."""
-        return write_json(path, self.state_dict())
+    def save(self, path, extra: dict | None = None) -> Path:
+        """Write :meth:`state_dict` to ``path`` atomically (a temporary file, then rename).
+
+        ``extra`` adds top-level entries (e.g. a closed loop's history); :meth:`load` ignores them.
+        """
+        return write_json(path, {**(extra or {}), **self.state_dict()})
 
     @classmethod
     def load(cls, path, space) -> "CapturePlanner":

@@ -28,6 +28,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import pulse_boxes
 from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps
+from nlosplan.sensor_models.zone_terms import zone_values
 from nlosplan.simulators.fast.fidelity import Fidelity, resolve_fidelity
 from nlosplan.simulators.fast.geometry import direct_returns, trace
 from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, _zone_names, plan_object
@@ -59,6 +60,10 @@ class PlanStatic:
     dark: bool
     objects: tuple[ObjectStatic, ...]
     object_rows: tuple[tuple[int, ...], ...]
+    zone_terms: tuple[str, ...] = ()
+    spads: int = 1
+    dead_time_ps: float | None = None
+    walk_ps: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -239,6 +244,14 @@ def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool) -> tuple[str,
     return "none", Term(False, "impulse response", "jitter 0, no pulse: ideal impulse response, no convolution")
 
 
+def _pileup_reason(sensor: SensorConfig) -> str:
+    if not sensor.pileup:
+        return "off in this sensor"
+    dead = "blind for the rest of the iteration" if sensor.dead_time_ps is None else \
+        f"non-paralyzable dead time {sensor.dead_time_ps:g} ps"
+    return f"{sensor.spads_per_zone} detector(s) per zone, {dead}; ambient and dark counts count toward it"
+
+
 def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool = True) -> SimPlan:
     """Plan the fast simulation of a batch of scenes and sensors.
 
@@ -325,8 +338,22 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     terms.append(Term(dark, "dark counts", "dark-count rate > 0" if dark else "dark-count rate is 0"))
     crosstalk = any(s.crosstalk > 0 for s in sensors) or not prune
     terms.append(Term(crosstalk, "crosstalk", "cover-glass return at zero path" if crosstalk else "crosstalk is 0"))
-    terms.append(Term(sensor.pileup, "pile-up", "Coates model" if sensor.pileup else "off in this sensor"))
+    terms.append(Term(sensor.pileup, "pile-up", _pileup_reason(sensor)))
     terms.append(Term(sensor.saturation, "saturation", "24-bit clip" if sensor.saturation else "off in this sensor"))
+    zv = zone_values(sensor, zones_out)
+    for key, name, what, neutral in (
+            ("gains", "zone gains", "per-zone gain", "all 1"),
+            ("offsets_ps", "zone time offsets", "per-zone TDC delay, nodes moved", "all 0"),
+            ("scales", "zone time scales", "per-zone TDC rate, nodes moved", "all 1"),
+            ("overlap_m", "near-field overlap", "r^2 / (r^2 + d0^2) per zone, r = c t / 2", "all 0")):
+        on = zv[key] is not None
+        terms.append(Term(on, name, what if on else f"{neutral} in this sensor"))
+    walk = sensor.time_walk_ps != 0
+    terms.append(Term(walk, "time walk", f"{sensor.time_walk_ps:g} ps earlier per decade of a zone's light, "
+                      "nodes moved per scene" if walk else "time_walk_ps is 0"))
+    tail = sensor.pulse_tail_fraction > 0
+    terms.append(Term(tail, "pulse tail", f"exponential, {sensor.pulse_tail_fraction:.2g} of the pulse, "
+                      f"decay {sensor.pulse_tail_decay_ps:g} ps" if tail else "pulse_tail_fraction is 0"))
 
     p = pulse_boxes(sensor)
     pulse = None if p is None else (tuple(p[0].tolist()), float(p[1]), tuple(p[2].tolist()))
@@ -336,11 +363,15 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         nominal_bin_width=float(sensor.bin_width_ps), pileup=sensor.pileup, saturation=sensor.saturation,
         ambient=ambient, dark=dark, objects=tuple(o.static for o in obj_plans),
         object_rows=tuple(tuple(int(r) for r in o.zone_rows) for o in obj_plans),
+        zone_terms=tuple(k for k, v in zv.items() if v is not None), spads=int(sensor.spads_per_zone),
+        dead_time_ps=None if sensor.dead_time_ps is None else float(sensor.dead_time_ps),
+        walk_ps=float(sensor.time_walk_ps),
     )
     s = path.shape[1]
     arrays = {
         "direct_path": path.ravel(), "direct_w": w.ravel(), "direct_row": np.repeat(np.arange(len(zones_out)), s),
         "objects": [o.arrays for o in obj_plans],
+        "zone": {k: v for k, v in zv.items() if v is not None},
     }
     paths = int(np.sum(w > 0)) + sum(o.paths for o in obj_plans)
     return SimPlan(static=static, arrays=arrays, zones=zones_out, full_grid=full_grid, terms=tuple(terms),

@@ -38,6 +38,7 @@ from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
+from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
 #: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
@@ -232,6 +233,14 @@ def object_nodes(static, arrays, scene_p, bw, t0):
     return total
 
 
+def zone_nodes(static, arrays, nodes, bw, t0, overlap: bool = True):
+    """The sensor's per-zone gain, overlap and time offset on node transients (Z, n_nodes) (none: unchanged)."""
+    if not static.zone_terms:
+        return nodes
+    grid = static.grid
+    return apply_zone_terms(nodes, grid.node_times(bw, t0), bw / grid.oversample, overlap=overlap, **arrays["zone"])
+
+
 def sensor_terms(static, arrays, sensor_p) -> dict:
     """What a sensor adds independently of the hidden objects (shared by every scene of a batch).
 
@@ -263,12 +272,19 @@ def sensor_terms(static, arrays, sensor_p) -> dict:
     if static.direct:
         nodes = deposit(grid, arrays["direct_path"] / C_M_PER_PS, arrays["direct_w"], arrays["direct_row"], z,
                         bin_width_ps=bw, start_offset_ps=t0)
-        direct = sp["photon_scale"] * to_bins(nodes)
+        direct_nodes = sp["photon_scale"] * zone_nodes(static, arrays, nodes, bw, t0)
+        direct = to_bins(direct_nodes)
     if static.crosstalk:
         nodes = deposit(grid, jnp.zeros((z,), dtype), jnp.broadcast_to(sp["crosstalk"], (z,)), jnp.arange(z), z,
                         bin_width_ps=bw, start_offset_ps=t0)
-        xt = to_bins(nodes)
-    return {"sp": sp, "to_bins": to_bins, "direct": direct, "crosstalk": xt}
+        xt_nodes = zone_nodes(static, arrays, nodes, bw, t0, overlap=False)
+        xt = to_bins(xt_nodes)
+    out = {"sp": sp, "to_bins": to_bins, "direct": direct, "crosstalk": xt}
+    if static.walk_ps:  # the time walk depends on each scene's total light: keep the unbinned nodes
+        zero_nodes = jnp.zeros((z, grid.n_nodes), dtype)
+        out["direct_nodes"] = direct_nodes if static.direct else zero_nodes
+        out["crosstalk_nodes"] = xt_nodes if static.crosstalk else zero_nodes
+    return out
 
 
 def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
@@ -276,20 +292,40 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
     sp, to_bins = terms["sp"], terms["to_bins"]
     dtype = arrays["direct_w"].dtype
     bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
-    obj = jnp.zeros_like(terms["direct"])
-    if static.objects:
-        obj = sp["photon_scale"] * to_bins(object_nodes(static, arrays, scene_p, bw, t0))
-    lam = terms["direct"] + obj + terms["crosstalk"]
+    if static.walk_ps:
+        direct, obj, xt = _walked(static, arrays, scene_p, terms, bw, t0)
+    else:
+        direct, xt = terms["direct"], terms["crosstalk"]
+        obj = jnp.zeros_like(terms["direct"])
+        if static.objects:
+            obj = sp["photon_scale"] * to_bins(zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
+                                                          bw, t0))
+    lam = direct + obj + xt
     rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
         sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
     bg = jnp.asarray(rate, dtype) * bw * 1e-12
+    dead = None if static.dead_time_ps is None else static.dead_time_ps / bw
     counts = counts_from_rates(lam, iterations=sp["iterations"], background_per_bin=bg, pileup=static.pileup,
-                               max_count=MAX_COUNT_24BIT if static.saturation else None)
+                               max_count=MAX_COUNT_24BIT if static.saturation else None, spads=static.spads,
+                               dead_bins=dead)
     if not parts:
         return counts
     it = sp["iterations"]
-    return counts, {"direct": it * terms["direct"], "object": it * obj,
-                    "background": jnp.broadcast_to(it * bg, counts.shape), "crosstalk": it * terms["crosstalk"]}
+    return counts, {"direct": it * direct, "object": it * obj,
+                    "background": jnp.broadcast_to(it * bg, counts.shape), "crosstalk": it * xt}
+
+
+def _walked(static, arrays, scene_p, terms, bw, t0):
+    """Direct, object and crosstalk photons per bin after the time walk of each zone's total light."""
+    sp, to_bins = terms["sp"], terms["to_bins"]
+    parts = [terms["direct_nodes"], jnp.zeros_like(terms["direct_nodes"]), terms["crosstalk_nodes"]]
+    if static.objects:
+        parts[1] = sp["photon_scale"] * zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
+                                                   bw, t0)
+    times = static.grid.node_times(bw, t0)
+    shift = walk_shift_ps(sum(window_light(p, times, t0, bw * static.grid.n_bins) for p in parts), static.walk_ps)
+    delta = bw / static.grid.oversample
+    return tuple(to_bins(move_nodes(p, times, delta, offsets_ps=shift)) for p in parts)
 
 
 def forward(static, arrays, scene_p, sensor_p, parts: bool = False):

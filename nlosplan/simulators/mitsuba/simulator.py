@@ -35,7 +35,9 @@ from nlosplan._jax import jnp
 from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.pipeline import background_per_bin, bin_arrivals, counts_from_rates, pulse_boxes, sample_counts
+from nlosplan.sensor_models.pipeline import (background_per_bin, bin_arrivals, counts_from_rates, dead_bins, pulse_boxes,
+                                             sample_counts)
+from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light, zone_values
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit_at, irf_extent_ps, irf_matrix
 from nlosplan.simulators.mitsuba.fidelity import resolve_twin_fidelity
 from nlosplan.simulators.mitsuba.geometry import detection, film_time_axis, flash_texture, time_grid
@@ -212,10 +214,23 @@ class TwinSimulator:
         return out
 
     # ------------------------------------------------------------ sensor
-    def _to_bins(self, nodes: np.ndarray) -> np.ndarray:
+    def _zone(self, nodes: np.ndarray):
+        """The sensor's per-zone terms on node transients (Z, K) (unchanged without any)."""
+        s, grid = self.sensor, self.grid
+        x = jnp.asarray(nodes, jnp.float64) if _x64() else jnp.asarray(nodes)
+        zv = zone_values(s, self.zone_ids)
+        if any(v is not None for v in zv.values()):
+            x = apply_zone_terms(x, grid.node_times(s.bin_width_ps, s.start_offset_ps), s.bin_width_ps / grid.oversample,
+                                 **zv)
+        return x
+
+    def _to_bins(self, nodes, shift_ps=None) -> np.ndarray:
         s, grid = self.sensor, self.grid
         pulse = pulse_boxes(s)
-        x = jnp.asarray(nodes, jnp.float64) if _x64() else jnp.asarray(nodes)
+        x = jnp.asarray(nodes)
+        if shift_ps is not None:
+            x = move_nodes(x, grid.node_times(s.bin_width_ps, s.start_offset_ps), s.bin_width_ps / grid.oversample,
+                           offsets_ps=shift_ps)
         if pulse is None and s.sigma_ps == 0:
             return np.asarray(bin_nodes_without_irf(grid, x), dtype=np.float64)
         mat = irf_matrix(grid, bin_width_ps=s.bin_width_ps, sigma_ps=s.sigma_ps, pulse=pulse,
@@ -238,17 +253,29 @@ class TwinSimulator:
         """
         s = self.sensor
         tr = self.transient()
-        direct = s.photon_scale * self._to_bins(tr["direct"])
-        obj = s.photon_scale * self._to_bins(tr["object"])
-        z = direct.shape[0]
+        direct_n = s.photon_scale * self._zone(tr["direct"])
+        obj_n = s.photon_scale * self._zone(tr["object"])
+        z = direct_n.shape[0]
+        zv = zone_values(s, self.zone_ids)
+        g = np.ones(z) if zv["gains"] is None else zv["gains"]
+        when = np.zeros(z) if zv["offsets_ps"] is None else zv["offsets_ps"].copy()
+        shift = None
+        if s.time_walk_ps != 0:  # each zone's light, crosstalk included, is recorded earlier the brighter it is
+            times = self.grid.node_times(s.bin_width_ps, s.start_offset_ps)
+            flux = np.asarray(window_light(direct_n + obj_n, times, s.start_offset_ps, s.window_ps)) + s.crosstalk * g
+            shift = np.asarray(walk_shift_ps(flux, s.time_walk_ps), dtype=np.float64)
+            when = when + shift
+        direct = self._to_bins(direct_n, shift)
+        obj = self._to_bins(obj_n, shift)
         xt = np.zeros_like(direct)
-        if s.crosstalk > 0:
-            xt = np.asarray(bin_arrivals(np.zeros((z, 1)), np.full((z, 1), s.crosstalk), s.bin_edges_ps(),
+        if s.crosstalk > 0:  # the zone's gain and time offset, no overlap
+            xt = np.asarray(bin_arrivals(when[:, None], (s.crosstalk * g)[:, None], s.bin_edges_ps(),
                                          s.sigma_ps, pulse_boxes(s)), dtype=np.float64)
         bg = background_per_bin(s, self.scene.lights_on)
         counts = np.asarray(counts_from_rates(jnp.asarray(direct + obj + xt), iterations=float(s.iterations),
                                               background_per_bin=bg, pileup=s.pileup,
-                                              max_count=MAX_COUNT_24BIT if s.saturation else None), dtype=np.float64)
+                                              max_count=MAX_COUNT_24BIT if s.saturation else None,
+                                              spads=s.spads_per_zone, dead_bins=dead_bins(s)), dtype=np.float64)
         if not parts:
             return self._shape(counts)
         it = float(s.iterations)

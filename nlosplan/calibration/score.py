@@ -1,0 +1,98 @@
+"""Score-only mode: a sensor against real data, nothing fitted (``nlosplan calibrate --score``).
+
+One entry point, :func:`score_input`, dispatches by the kind of input
+(:func:`input_kind`). Kinds and what scores them:
+
+- ``plane``: a JSON list of plane captures at known distances
+  (``tmf882x_distance`` layout) -> per-zone table of :mod:`.plane_scores`.
+- ``denali folder``, ``capture store``, ``statistics``: recognised, not scored
+  yet (a clear error says so); a scorer is one more entry of :data:`SCORERS`.
+
+Scene-side inputs (the plane's arrivals) come from the caller, so this module
+stays on the sensor side of the rooms.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from nlosplan.errors import UserError
+from nlosplan.sensor_models.config import SensorConfig
+
+KINDS = ("plane", "denali folder", "capture store", "statistics")
+
+
+def input_kind(path) -> str:
+    """The kind of a real-data input (one of :data:`KINDS`).
+
+    Raises
+    ------
+    UserError
+        A path that does not exist or is none of the kinds.
+    """
+    p = Path(path)
+    if p.is_dir():
+        return "denali folder"
+    if not p.exists():
+        raise UserError(f"cannot read {p}: no such file or folder")
+    if p.suffix in (".sqlite", ".db"):
+        return "capture store"
+    if p.suffix == ".json":
+        try:
+            data = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise UserError(f"{p} is not valid JSON: {str(exc).splitlines()[0]}") from None
+        if isinstance(data, list):
+            return "plane"
+        if isinstance(data, dict):
+            return "statistics"
+    raise UserError(f"{p} is neither plane captures (.json list), a DENALI folder, a capture store (.sqlite) "
+                    "nor a statistics file (.json object)")
+
+
+def _score_plane(path, sensor: SensorConfig, *, plane_arrivals, min_distance_m, max_distance_m, **_) -> dict:
+    from nlosplan.calibration.plane_scores import TARGETS, score_plane, tables_dict
+    from nlosplan.calibration.tmf882x_fit import load_distance_captures
+
+    caps = load_distance_captures(path)
+    rows, per = score_plane(sensor, caps, plane_arrivals(sensor), min_distance_m=min_distance_m,
+                            max_distance_m=max_distance_m)
+    return {"kind": "plane", "input": str(path), "sensor": sensor.name, "zones": tables_dict(rows),
+            "per_capture": per, "targets": TARGETS, "rows": [asdict(r) for r in rows]}
+
+
+#: Scorer of each kind that can be scored.
+SCORERS = {"plane": _score_plane}
+
+
+def score_input(path, sensor: SensorConfig, *, plane_arrivals=None, min_distance_m: float = 0.06,
+                max_distance_m: float = float("inf")) -> dict:
+    """Score ``sensor`` on the real data at ``path`` without fitting anything.
+
+    Parameters
+    ----------
+    path : str or Path
+    sensor : SensorConfig
+    plane_arrivals : callable
+        ``plane_arrivals(sensor) -> arrivals(distance_m) -> (times_ps (Z, K), weights (Z, K))``.
+    min_distance_m, max_distance_m : float
+        Plane captures outside this range are not scored.
+
+    Returns
+    -------
+    dict
+        ``kind``, ``zones`` (per-zone rows with the targets each meets), ``per_capture``, ``targets``.
+
+    Raises
+    ------
+    UserError
+        Unreadable input, or a kind that cannot be scored yet.
+    """
+    kind = input_kind(path)
+    if kind not in SCORERS:
+        raise UserError(f"--score takes plane captures (a JSON list) so far; {path} is a {kind}, which cannot be "
+                        "scored without fitting yet")
+    return SCORERS[kind](path, sensor, plane_arrivals=plane_arrivals, min_distance_m=min_distance_m,
+                         max_distance_m=max_distance_m)

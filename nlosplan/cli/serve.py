@@ -1,0 +1,144 @@
+"""``nlosplan serve PATH``: the live view of a design output folder or a capture store (finished or running)."""
+
+from __future__ import annotations
+
+import json
+import secrets
+import sys
+from pathlib import Path
+
+from nlosplan.cli.common import int_type, number_type, sub_parser
+from nlosplan.errors import UserError
+
+DEFAULT_PORT = 8050
+
+DESCRIPTION = """\
+Serve a web page over the files a run writes, and keep it up to date while the
+run goes on (a finished run's page shows its end). PATH is:
+
+- a design output folder (nlosplan design --out): stage and progress, the answer
+  so far, trade-off plots (hover a point for its design), the evaluators' error
+  against run time;
+- a capture store: the rig page of its newest rig run (or --run): the rig map,
+  the last histogram of every zone, captures stored / planned / left, faults;
+  with --planner DIR (a 'rig run --out' folder) also the planner's route,
+  localization RMSE and calibration, and the approval gate of 'rig run --approve';
+- a 'rig run --out' folder of a finished run (its rig_run.json names the store).
+
+The page reads the files (SQLite read-only) and writes nothing, except an
+answer to the approval gate. Safety: it listens on 127.0.0.1 unless --host says
+otherwise; approving, editing or refusing a batch (which moves the gantry) needs
+the token of the URL printed here; a store that cannot be written (an archive)
+and --read-only give pages without actions. --live on design, rig capture and
+rig run starts the same page for the run in progress."""
+
+
+def _host(text: str) -> str:
+    if not text or any(c.isspace() for c in text):
+        raise UserError(f"--host {text!r}: give an address such as 127.0.0.1, 0.0.0.0 or a host name")
+    return text
+
+
+def resolve_page(path, *, planner=None, run=None, read_only=False):
+    """The page of ``PATH`` (:class:`~nlosplan.reports.live.server.Page` without its token), or a one-line UserError."""
+    from nlosplan.reports.live.design_watch import is_design_folder
+    from nlosplan.reports.live.rig_watch import PLANNER, is_store
+    from nlosplan.reports.live.server import Page
+
+    p = Path(path)
+    if not p.exists():
+        raise UserError(f"{p} does not exist; give a design output folder or a capture store")
+    if planner is not None and not Path(planner).is_dir():
+        raise UserError(f"--planner {planner} is not a folder (give the 'rig run --out' folder)")
+    if is_design_folder(p):
+        if planner is not None or run is not None:
+            raise UserError(f"{p} is a design output folder: --planner and --run belong to a capture store's page")
+        return Page("design", p)
+    if is_store(p):
+        return Page("rig", p, planner_dir=None if planner is None else Path(planner), run_id=run,
+                    actions=planner is not None and not read_only)
+    if p.is_dir() and (p / PLANNER).is_file():
+        try:
+            store = Path(json.loads((p / "rig_run.json").read_text(encoding="utf-8"))["store"])
+        except (OSError, json.JSONDecodeError, KeyError, TypeError):
+            raise UserError(f"{p} is a 'rig run' folder without rig_run.json (the run has not finished): "
+                            f"give its store, nlosplan serve STORE --planner {p}") from None
+        if not is_store(store):
+            raise UserError(f"{p}/rig_run.json names the store {store}, which is not a capture store here: "
+                            f"give it, nlosplan serve STORE --planner {p}")
+        return Page("rig", store, planner_dir=p, run_id=run, actions=not read_only)
+    raise UserError(f"{p} is neither a design output folder (no design_checkpoint.json or "
+                    "design_evaluations.jsonl) nor a capture store")
+
+
+def with_token(page, host: str, token: str | None, no_token: bool):
+    """``page`` with the token actions need (a new random one by default); refuses a non-loopback host
+    serving actions without a token."""
+    from dataclasses import replace
+
+    from nlosplan.reports.live.server import is_loopback
+
+    if not page.actions:
+        return replace(page, token=None)
+    if no_token:
+        if not is_loopback(host):
+            raise UserError(f"--host {host} with --no-token would let anyone who reaches this machine move the "
+                            "gantry: drop --no-token (the token is printed here), or add --read-only")
+        return replace(page, token=None)
+    return replace(page, token=token or secrets.token_urlsafe(16))
+
+
+def _cmd_serve(args) -> int:
+    from nlosplan.reports.live.server import bind, page_url, serve
+
+    if args.token is not None and args.no_token:
+        raise UserError("--token and --no-token exclude each other")
+    if args.token is not None and len(args.token) < 8:
+        raise UserError("--token must have at least 8 characters")
+    page = with_token(resolve_page(args.path, planner=args.planner, run=args.run, read_only=args.read_only),
+                      args.host, args.token, args.no_token)
+    sock = bind(args.host, args.port)
+    port = sock.getsockname()[1]
+    what = f"design page of {page.path}" if page.kind == "design" else f"rig page of {page.path}"
+    print(f"nlosplan serve: {what} at {page_url(args.host, port, page.token)}  (Ctrl-C to stop)", file=sys.stderr,
+          flush=True)
+    if page.actions and page.token:
+        print("nlosplan serve: approving, editing or refusing a batch needs the token in this URL; keep it private",
+              file=sys.stderr, flush=True)
+    import signal
+
+    def _stop(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGTERM, _stop)   # a service manager's stop ends it like Ctrl-C
+    except ValueError:                          # not the main thread (an embedding program's): keep its handler
+        pass
+    try:
+        serve(sock, page, poll_ms=int(1000 * args.poll))
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+def add(sub) -> None:
+    """The ``serve`` subcommand."""
+    p = sub_parser(sub, "serve", "serve", "live web page of a design folder or a capture store (finished or running)",
+                   description=DESCRIPTION)
+    p.add_argument("path", metavar="PATH", help="design output folder, capture store, or 'rig run --out' folder")
+    p.add_argument("--planner", metavar="DIR", default=None,
+                   help="with a store: the 'rig run --out' folder (route, RMSE, calibration, approval gate)")
+    p.add_argument("--run", default=None, help="with a store: the run to show (default: the newest)")
+    p.add_argument("--host", type=_host, default="127.0.0.1",
+                   help="address to listen on (default: %(default)s, this machine only; 0.0.0.0: every interface)")
+    p.add_argument("--port", type=int_type(0, 65535), default=DEFAULT_PORT,
+                   help="TCP port (default: %(default)s; 0: any free port)")
+    p.add_argument("--token", default=None, help="the token actions need (default: a new random one, printed)")
+    p.add_argument("--no-token", action="store_true", help="actions without a token (only on a loopback --host)")
+    p.add_argument("--read-only", action="store_true", help="no actions, whatever the store")
+    p.add_argument("--poll", type=number_type(float), default=1.0, metavar="S",
+                   help="seconds between reads of the files (default: 1)")
+    p.set_defaults(func=_cmd_serve)
+
+
+__all__ = ["add", "resolve_page", "with_token", "DEFAULT_PORT"]
