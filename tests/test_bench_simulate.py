@@ -15,6 +15,8 @@ from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
 
 SMALL_REFERENCE = Fidelity(zone_sub=4, flash_sub=6, flash_outer=6, object_samples=1024, time_oversample=4)
 LEVELS = ("draft", "low")
+#: Scene models of the small run (the mount's model costs two more Lambertian terms: left out here).
+MODELS = ("retroreflective", "mixed")
 REQUIRED = {"fidelity", "knobs", "seconds_single", "seconds_per_scene_batched", "scenes_per_second",
             "compile_seconds", "rel_l1_error", "centroid_shift_bins"}
 
@@ -33,7 +35,8 @@ def run(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(FIDELITY_LEVELS, "reference", SMALL_REFERENCE)
         # the pruning study on the cheapest level: its compiled code is shared with that level's run
-        result, text = cli_bench.run_from_args(args, steps.append, study_level="draft", matmul_n=256, min_seconds=0.0)
+        result, text = cli_bench.run_from_args(args, steps.append, study_level="draft", matmul_n=256, min_seconds=0.0,
+                                               models=MODELS)
     return result, text, plot, steps
 
 
@@ -54,7 +57,7 @@ def test_json_has_the_required_keys_and_types(run):
     assert result["reference"]["half_knobs"]["object_samples"] == SMALL_REFERENCE.object_samples // 2
     assert result["config"]["positions"] == list(range(6)) and result["config"]["reference_positions"] == [0]
     assert result["machine"]["cpu_count"] >= 1 and result["machine"]["jax_devices"]
-    assert len(steps) == bench.bench_steps(LEVELS, (0,)) and all(isinstance(s, str) and s for s in steps)
+    assert len(steps) == bench.bench_steps(LEVELS, (0,), MODELS) and all(isinstance(s, str) and s for s in steps)
     json.dumps(result, allow_nan=False)  # strict JSON: no NaN or infinity
 
 
@@ -68,6 +71,29 @@ def test_errors_are_finite_and_reflect_the_levels(run):
         assert 0 <= r["centroid_shift_bins"] < 1.0
         # the levels are coarser than the reference, whose own error (half the samples) is the smaller
         assert r["rel_l1_error"] > ref["reference_self_error"]
+
+
+def test_scene_models_are_timed_and_scored_in_the_same_run(run):
+    result = run[0]
+    rows = {r["model"]: r for r in result["models"]}
+    assert list(rows) == list(MODELS)
+    draft = next(r for r in result["levels"] if r["fidelity"] == "draft")
+    # the retroreflective model is the study level's own scenes against the same reference
+    assert rows["retroreflective"]["rel_l1_error"] == pytest.approx(draft["rel_l1_error"], rel=1e-9)
+    assert rows["retroreflective"]["speed_ratio_vs_retroreflective"] == 1.0
+    for r in rows.values():
+        assert r["level"] == "draft" and 0 < r["rel_l1_error"] < 0.5 and 0 <= r["centroid_shift_bins"] < 1.0
+        assert r["scenes_per_second"] > 0 and math.isfinite(r["speed_ratio_vs_retroreflective"])
+    # the diffuse base costs paths of its own
+    assert rows["retroreflective"]["paths_per_scene"] < rows["mixed"]["paths_per_scene"]
+    assert bench.MODEL_OPTIONS["mixed+mount"] == {**bench.MODEL_OPTIONS["mixed"], "mount": True,
+                                                  "mount_in_background": False}
+    assert "model mixed (albedo=0.36, diffuse_albedo=0.2; draft, batched)" in run[1]
+
+
+def test_unknown_scene_model_is_rejected():
+    with pytest.raises(UserError, match="unknown scene model 'glossy'; allowed: retroreflective, mixed, mixed\\+mount"):
+        bench.bench_simulate(levels=("draft",), positions=range(3), reference_positions=(0,), models=("glossy",))
 
 
 def test_pruned_equals_unpruned_and_does_less(run):

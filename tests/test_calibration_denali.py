@@ -233,7 +233,8 @@ def test_wall_zones_and_backgrounds():
     assert wall_zones(preset("tmf8828-3x3-short")) == list(range(9))
     assert matching_scene("NOOBJECT", "4in", 7).objects == ()
     mount = matching_scene("NOOBJECTMOUNT", "4in", 7)
-    assert [o.name for o in mount.objects] == ["object mount"] and mount.objects[0].reflectance == "lambertian"
+    assert [o.name for o in mount.objects] == ["object mount", "mount plate"]
+    assert all(o.reflectance == "lambertian" for o in mount.objects)
 
 
 def _one_line_error(capsys, argv, message):

@@ -114,8 +114,23 @@ def test_zones_on_a_preset_of_another_zone_mode_warns_what_it_keeps(capsys):
     assert code == 0
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("nlosplan: warning: --zones 8x8 changes only the zone grid")
-    assert "keeps its 33x32 deg field of view and 550000 iterations" in lines[0]
+    from nlosplan.sensor_models import preset
+
+    three = preset("tmf8828-3x3-short")
+    assert f"keeps its 33x32 deg field of view and {three.iterations} iterations" in lines[0]
     assert "--sensor tmf8828-8x8-short" in lines[0]
+
+
+def test_explain_says_what_the_mixture_and_the_mount_compute(capsys, tmp_path):
+    code, out, err = run(capsys, "simulate", "--explain", "--fidelity", "draft", "--only-zones", "1,1",
+                         "--diffuse-albedo", "0.2", "--object-albedo", "0.4", "--mount", "--mount-in-signal",
+                         "--plot", "", "--out", str(tmp_path / "m.npy"))
+    assert code == 0, err
+    lines = [" ".join(line.split()) for line in out.splitlines()]
+    assert any(line.startswith("computed object 'A_8in': diffuse base Lambertian (albedo 0.2)") for line in lines)
+    assert any(line.startswith("computed object 'object mount' Lambertian") for line in lines)
+    assert any(line.startswith("computed object 'mount plate' Lambertian") for line in lines)
+    assert not any("fixture" in line for line in lines)  # in the signal: not a fixture
 
 
 def test_only_zones_gives_those_zones_of_the_full_grid(capsys, tmp_path, denali):
@@ -192,6 +207,10 @@ def test_wall_scene_writes_what_it_did_before(capsys, tmp_path):
         (["--scene", "corner", "--size", "4in"], "--size 4in"),
         (["--distance", "0.3"], "--distance 0.3"),
         (["--scene", "denali", "--object-yaw", "10"], "--object-yaw 10.0"),
+        (["--diffuse-albedo", "0.9"], "their sum must be <= 1"),
+        (["--reflectance", "lambertian", "--diffuse-albedo", "0.2"], "diffuse albedo is its albedo"),
+        (["--mount-in-signal"], "--mount-in-signal needs --mount"),
+        (["--scene", "wall", "--diffuse-albedo", "0.1"], "--diffuse-albedo"),
     ],
 )
 def test_bad_input_exits_2_with_one_line_naming_it(capsys, argv, names):

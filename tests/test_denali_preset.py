@@ -184,7 +184,8 @@ def test_scene_defaults_and_meta():
     assert s.meta == {
         "preset": "denali", "object": "A", "size": "8in", "position": 19, "class_group": "letters",
         "lights": "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": "retroreflective",
-        "albedo": 0.5, "lobe_fwhm_deg": 2.0, "mount": False, "wall_albedo": 0.8, "tables": True,
+        "albedo": 0.5, "lobe_fwhm_deg": 2.0, "diffuse_albedo": 0.0, "mount": False, "wall_albedo": 0.8,
+        "tables": True,
     }
     assert s.lights_on is False and len(s.objects) == 1 and len(s.planes) == 2
     o = s.objects[0]

@@ -1,13 +1,21 @@
-"""Reduced cross-validation (CI): twin and fast backend agree on Lambertian DENALI objects.
+"""Reduced cross-validation (CI): twin and fast backend agree on DENALI objects.
 
-The full table (3 objects x 2 sizes x 10 positions) is made by
-``nlosplan bench crossval``; here two cases at the twin's cross-validation fidelity.
+The full table (3 models x 3 objects x 2 sizes x 10 positions) is made by
+``nlosplan bench crossval``; here a few cases per model at the twin's cross-validation fidelity.
 """
 
 import numpy as np
 import pytest
 
-from nlosplan.simulators.mitsuba.crossval import CENTROID_TARGET_BINS, L1_TARGET, compare_signals, cross_validate
+from nlosplan.errors import UserError
+from nlosplan.simulators.mitsuba.crossval import (
+    CENTROID_TARGET_BINS,
+    L1_TARGET,
+    check_models,
+    compare_signals,
+    cross_validate,
+    format_table,
+)
 
 
 def test_compare_signals_metrics():
@@ -29,3 +37,21 @@ def test_twin_agrees_with_fast_backend_on_two_cases():
         assert case["rel_l1"] <= L1_TARGET, case
         assert case["centroid_shift_bins"] <= CENTROID_TARGET_BINS, case
         assert 0.95 < case["total_ratio"] < 1.05, case
+
+
+@pytest.mark.parametrize("model, obj, position", [("mixed", "A", 19), ("mixed", "circle", 73), ("mount", "circle", 73)])
+def test_twin_agrees_on_mixed_reflectance_and_mount(model, obj, position):
+    result = cross_validate(objects=(obj,), sizes=("8in",), positions=(position,), models=(model,))
+    (case,) = result["cases"]
+    assert case["model"] == model
+    assert case["rel_l1"] <= L1_TARGET, case
+    assert case["centroid_shift_bins"] <= CENTROID_TARGET_BINS, case
+    assert 0.95 < case["total_ratio"] < 1.05, case
+    assert f"| {model} | {obj} | 8in | 1 |" in format_table(result)
+
+
+def test_unknown_crossval_model_is_one_line_error():
+    with pytest.raises(UserError, match="unknown cross-validation model 'glossy'; allowed: lambertian, mixed, mount"):
+        check_models(["mixed", "glossy"])
+    with pytest.raises(UserError, match="no cross-validation model"):
+        check_models([])

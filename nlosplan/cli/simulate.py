@@ -138,10 +138,14 @@ def _nlos_scene(args):
     """The DENALI or corner scene from the options given."""
     from nlosplan.simulators import corner_scene, denali_scene
 
-    common = _given(args, reflectance="reflectance", albedo="object_albedo", lobe_fwhm_deg="lobe_deg")
+    common = _given(args, reflectance="reflectance", albedo="object_albedo", lobe_fwhm_deg="lobe_deg",
+                    diffuse_albedo="diffuse_albedo")
     if args.scene == "denali":
+        if args.mount_in_signal and not args.mount:
+            raise UserError("--mount-in-signal needs --mount (it says where the mount is)")
+        extra = {"mount_in_background": False} if args.mount_in_signal else {}
         return denali_scene(**_given(args, obj="object", size="size", position="position", mount="mount"),
-                            lights=args.lights, **common)
+                            lights=args.lights, **common, **extra)
     xy = {} if args.object_xy is None else {"object_xy": _parse_xy(args.object_xy)}
     return corner_scene(**_given(args, wall_distance="wall_distance", object="object", object_size="object_size",
                                  yaw_deg="object_yaw"), **xy, lights_on=args.lights == "on", **common)
@@ -185,7 +189,7 @@ def _save(arrays: dict, paths: dict[str, Path], seconds: float) -> dict:
 def _nlos_title(args, meta: dict, sensor, fidelity: str) -> str:
     """Two-line plot title: scene, object, position or place, reflectance, lights; sensor, jitter, fidelity."""
     if args.scene == "denali":
-        mount = " + mount" if args.mount else ""
+        mount = (" + mount (in the signal)" if args.mount_in_signal else " + mount") if args.mount else ""
         what = f"DENALI {meta['object']}_{meta['size']}{mount} at gantry position {meta['position']}"
     else:
         x, y = meta["object_xy"]
@@ -459,7 +463,10 @@ def add(sub) -> None:
     add = _scene_options(sim.add_argument_group("DENALI rig (--scene denali)"), ("denali",), only)
     add("--size", choices=["4in", "8in"], help="object size (default: 8in)")
     add("--position", type=int, metavar="N", help="gantry position, 0 to 99 (default: 19)")
-    add("--mount", action="store_true", help="add the object mount (a Lambertian post) as a second object")
+    add("--mount", action="store_true", help="add the object mount and its plate (Lambertian 0.8); they stay in "
+                                             "the background capture (DENALI's NOOBJECT), so they cancel from the signal")
+    add("--mount-in-signal", action="store_true", help="with --mount: a background without the mount (DENALI's "
+                                                       "NOOBJECTMOUNT), so the mount's return is in the signal")
 
     add = _scene_options(sim.add_argument_group("corner (--scene corner)"), ("corner",), only)
     add("--wall-distance", type=float, metavar="M", help="LiDAR to relay wall, metres (default: 0.5)")
@@ -477,6 +484,8 @@ def add(sub) -> None:
         help="object reflectance (default: retroreflective for denali, lambertian for corner)")
     add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: 0.5)")
     add("--lobe-deg", type=float, metavar="DEG", help="retroreflective lobe FWHM, degrees (default: 2)")
+    add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A", help="Lambertian base of a retroreflective object, 0..1, with "
+                                                          "object albedo + diffuse albedo <= 1 (default: 0)")
     add("--backend", choices=["fast", "mitsuba"],
         help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
              "cuda_ad_rgb; e.g. --backend mitsuba --fidelity low takes ~10 s on 2 cores)")

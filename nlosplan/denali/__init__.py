@@ -33,6 +33,7 @@ from nlosplan.denali.rig import (
     class_group,
     data_dir,
     object_pose,
+    plate_pose,
     object_poses,
     positions_xy,
     read_json,
@@ -44,6 +45,6 @@ from nlosplan.denali.rig import (
 __all__ = [
     "ALIASES", "CLASS_GROUPS", "DENALI_OBJECTS", "GRID_N", "MOUNT_OFFSET", "N_POSITIONS", "PITCH_MM", "SIZES",
     "TABLE_SIZE", "TRAVEL_MM", "WALL_SIZE", "WALL_TAG_DROP", "WALL_TAG_MARGIN", "camera_pose", "check_object",
-    "check_position", "check_size", "class_group", "data_dir", "grid_index", "grid_mm", "label_xy", "object_pose",
+    "check_position", "check_size", "class_group", "data_dir", "grid_index", "grid_mm", "label_xy", "object_pose", "plate_pose",
     "object_pose_mm", "object_poses", "positions_xy", "read_json", "tag1_positions", "tag_pose", "tag_transform",
 ]

@@ -49,6 +49,7 @@ from nlosplan.errors import UserError
 
 __all__ = [
     "ALIASES", "CLASS_GROUPS", "DENALI_OBJECTS", "MOUNT_OFFSET", "N_POSITIONS", "SIZES", "TABLE_SIZE",
+    "plate_pose",
     "WALL_SIZE", "WALL_TAG_DROP", "WALL_TAG_MARGIN", "camera_pose", "check_object", "check_position", "check_size",
     "class_group", "data_dir", "object_pose", "object_poses", "positions_xy", "read_json", "tag1_positions",
     "tag_pose", "tag_transform",
@@ -162,6 +163,17 @@ def object_pose(position: int) -> np.ndarray:
         ``T(tag 1) . Rx(-90 deg) . translate(0, -0.005, -0.04)`` (metres).
     """
     return np.array(object_poses()[check_position(position)])
+
+
+def plate_pose(object_to_world: np.ndarray) -> np.ndarray:
+    """Pose of the mount plate (tag 1's frame turned z-up) for an object pose, shape (4, 4), metres.
+
+    ``object_to_world @ translate(-MOUNT_OFFSET)``: what DENALI's twin uses
+    for the plate (the object sits ``MOUNT_OFFSET`` from tag 1).
+    """
+    back = np.eye(4)
+    back[:3, 3] = -np.asarray(MOUNT_OFFSET)
+    return np.asarray(object_to_world, dtype=np.float64) @ back
 
 
 @lru_cache(maxsize=None)

@@ -71,11 +71,24 @@ def format_bench_simulate(result: dict) -> str:
         f"lights off {1e3 * pr['lights_off_seconds']:.3g} ms vs on {1e3 * pr['lights_on_seconds']:.3g} ms: "
         f"x{pr['lights_off_speedup']:.2f}",
         _arith_line(ar),
+        *_model_lines(result.get("models", [])),
         f"machine: {', '.join(mc['jax_devices'])}; {mc['cpu_count']} CPU cores ({mc['processor']}); jax {mc['jax']}, "
         f"numpy {mc['numpy']}; load average {mc['load_average_start']} at start, {mc.get('load_average_end')} at end",
         verdict(result),
     ]
     return "\n".join(lines)
+
+
+def _model_lines(rows: list) -> list[str]:
+    """One line per scene model of ``bench simulate`` (timed back to back at the study level)."""
+    out = []
+    for r in rows:
+        opts = ", ".join(f"{k}={v}" for k, v in r["options"].items()) or "the preset's defaults"
+        out.append(f"model {r['model']} ({opts}; {r['level']}, batched): {r['scenes_per_second']:.4g} scenes/s "
+                   f"(x{r['speed_ratio_vs_retroreflective']:.2f} of retroreflective in the same run), "
+                   f"{r['paths_per_scene']:,} paths, rel L1 {_pct(r['rel_l1_error'])}, centroid "
+                   f"{r['centroid_shift_bins']:.3g} bins")
+    return out
 
 
 def _knobs(k: dict) -> str:

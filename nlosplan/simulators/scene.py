@@ -341,12 +341,29 @@ class HiddenObject:
         Rigid object-to-world transform.
     reflectance : {"retroreflective", "lambertian"}
         Retroreflective: light returns towards where it came from in a
-        Gaussian lobe of FWHM ``lobe_fwhm_deg``. Lambertian: diffuse.
+        Gaussian lobe of FWHM ``lobe_fwhm_deg`` (plus the Lambertian base
+        ``diffuse_albedo``). Lambertian: diffuse.
     albedo : float
-        Fraction of the incident power reflected, in [0, 1].
+        Fraction of the incident power reflected, in [0, 1]: by the lobe
+        (retroreflective) or diffusely (Lambertian).
     lobe_fwhm_deg : float
         Angular FWHM of the retroreflected lobe, degrees (>= 0; retroreflective only).
+    diffuse_albedo : float
+        Retroreflective objects only: the fraction of the incident power
+        reflected diffusely (a Lambertian base under the retroreflective
+        tape, bare edges), in [0, 1] with ``albedo + diffuse_albedo <= 1``.
+        0 (default) is a pure retroreflector.
+    fixture : bool
+        Part of the rig that moves with the gantry (the object's mount):
+        it stays in the background capture, see :meth:`Scene.without_objects`.
     name : str
+
+    Notes
+    -----
+    The two parts of a retroreflective object add: radiance leaving a
+    surface point lit with irradiance ``E`` from direction ``w_l`` is
+    ``albedo p(w) E / cos(w) + diffuse_albedo E / pi`` with ``p`` the lobe
+    (a unit-mass density over directions around ``w_l``).
     """
 
     mesh: Mesh
@@ -355,6 +372,8 @@ class HiddenObject:
     albedo: float = 0.5
     lobe_fwhm_deg: float = 2.0
     name: str = "object"
+    diffuse_albedo: float = 0.0
+    fixture: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.mesh, Mesh):
@@ -367,8 +386,21 @@ class HiddenObject:
         lobe = self.lobe_fwhm_deg
         if not (isinstance(lobe, (int, float, np.integer, np.floating)) and math.isfinite(lobe) and 0 <= lobe <= 90):
             raise UserError(f"lobe_fwhm_deg={lobe!r} is out of range; allowed: 0 to 90 degrees")
+        diff = self.diffuse_albedo
+        if isinstance(diff, bool) or not (isinstance(diff, (int, float, np.integer, np.floating)) and 0 <= float(diff) <= 1):
+            raise UserError(f"object diffuse_albedo={diff!r} is out of range; allowed: 0 to 1")
+        if float(diff) > 0 and self.reflectance == "lambertian":
+            raise UserError(f"object {self.name!r}: diffuse_albedo is the Lambertian base of a retroreflective object; "
+                            "a Lambertian object's diffuse albedo is its albedo")
+        if float(self.albedo) + float(diff) > 1 + 1e-12:
+            raise UserError(f"object {self.name!r}: albedo {float(self.albedo):g} + diffuse_albedo {float(diff):g} "
+                            "reflects more than the incident power; their sum must be <= 1")
+        if not isinstance(self.fixture, (bool, np.bool_)):
+            raise UserError(f"fixture={self.fixture!r} must be true or false")
         object.__setattr__(self, "albedo", float(self.albedo))
         object.__setattr__(self, "lobe_fwhm_deg", float(lobe))
+        object.__setattr__(self, "diffuse_albedo", float(diff))
+        object.__setattr__(self, "fixture", bool(self.fixture))
 
     def world_vertices(self) -> np.ndarray:
         """Mesh vertices in the world frame, shape (V, 3)."""
@@ -435,9 +467,18 @@ class Scene:
                 raise UserError("scene objects must be HiddenObject instances")
             _check_object_vs_wall(obj, self.wall)
 
-    def without_objects(self) -> "Scene":
-        """The background scene (DENALI's NOOBJECT capture): same rig, no hidden objects."""
-        return dataclasses.replace(self, objects=(), meta={**self.meta, "background": True})
+    def without_objects(self, keep_fixtures: bool = True) -> "Scene":
+        """The background scene: same rig, the hidden objects taken away.
+
+        Parameters
+        ----------
+        keep_fixtures : bool
+            Keep the objects marked ``fixture`` (the mount that stays on the
+            gantry), as in DENALI's NOOBJECT capture; False removes them too
+            (NOOBJECTMOUNT: no object mount).
+        """
+        kept = tuple(o for o in self.objects if o.fixture) if keep_fixtures else ()
+        return dataclasses.replace(self, objects=kept, meta={**self.meta, "background": True})
 
     def replace(self, **changes: Any) -> "Scene":
         """Copy with fields changed (validated again)."""

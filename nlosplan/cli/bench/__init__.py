@@ -213,7 +213,13 @@ gantry positions (JAX compile time apart), histograms per second, and the error
 of the three-bounce histogram (expected minus the no-object background) against
 a converged float64 reference: relative L1 and centroid shift in bins. Also the
 reference's own error, what pruning saves (pruned vs prune=False, the centre
-zone alone, lights off vs on), and the arithmetic rate against a float32 matrix
-product measured in the same process. Takes a few minutes (the reference).
+zone alone, lights off vs on), the arithmetic rate against a float32 matrix
+product measured in the same process, and the scene models timed back to back
+at the default level, each against its own reference: retroreflective (the
+preset), mixed (retroreflective 0.36 on a Lambertian base of 0.2, DENALI's
+Table-2 fit) and mixed+mount (with the mount and plate in the signal). Takes
+several minutes (the references).
 JSON: {"levels": [{"fidelity", "scenes_per_second", "rel_l1_error",
-"centroid_shift_bins", ...}...], "reference", "pruning", "arithmetic", ...}."""
+"centroid_shift_bins", ...}...], "reference", "pruning", "arithmetic",
+"models": [{"model", "scenes_per_second", "speed_ratio_vs_retroreflective",
+"rel_l1_error", "centroid_shift_bins", ...}...], ...}."""

@@ -18,11 +18,15 @@ JSON: {"rows": [{"backend", "fidelity", "seconds", "rel_l1_error"}...],
 "speedup_at_equal_error": number, "speedups", "reference", "config"}."""
 
 CROSSVAL_DESCRIPTION = """\
-Cross-validation of the twin against the fast backend on the DENALI rig with
-Lambertian objects: every object x size x position, normalized relative L1 of
-the background-subtracted three-bounce histogram (target <= 5 %) and centroid
-shift (target <= 0.5 bin, zones with >= 5 % of the signal). About 2 minutes
-for the default 60 cases on 2 cores. JSON: {"cases": [...], "summary": {...}}."""
+Cross-validation of the twin against the fast backend on the DENALI rig: every
+reflectance model x object x size x position, normalized relative L1 of the
+three-bounce histogram (target <= 5 %) and centroid shift (target <= 0.5 bin,
+zones with >= 5 % of the signal). Models: lambertian (albedo 0.5), mixed (a
+2 deg retroreflective lobe of 0.4 on a Lambertian base of 0.4), mount (a
+Lambertian object with the mount and plate, 0.8, in the signal). About 2
+minutes per model for 60 cases on 2 cores. JSON: {"cases": [{"model",
+"object", "size", "position", "rel_l1", "centroid_shift_bins", "total_ratio",
+...}...], "summary": {...}, "config": {...}}."""
 
 
 def _cmd_fidelity(args) -> int:
@@ -53,15 +57,18 @@ def _cmd_fidelity(args) -> int:
 def _cmd_crossval(args) -> int:
     from nlosplan.simulators.mitsuba.crossval import cross_validate, format_table
 
+    from nlosplan.simulators.mitsuba.crossval import check_models
+
+    models = check_models(m.strip() for m in args.models.split(",") if m.strip())
     objects, sizes = args.objects, args.sizes
     positions = range(0, 100, 100 // args.positions)[: args.positions]
-    n = len(objects) * len(sizes) * len(positions)
+    n = len(models) * len(objects) * len(sizes) * len(positions)
     with progress_bar(args, n, "bench crossval", "case") as bar:
         def progress(text):
             bar.update(1, text[:60])
 
-        result = cross_validate(objects, sizes, positions, twin_fidelity={"spp": args.spp, "zone_sub": 8},
-                                seed=args.seed, progress=progress)
+        result = cross_validate(objects, sizes, positions, models=models,
+                                twin_fidelity={"spp": args.spp, "zone_sub": 8}, seed=args.seed, progress=progress)
     emit(args, result, format_table(result))
     return 0 if result["summary"]["passed"] == result["summary"]["cases"] else 1
 
@@ -83,8 +90,11 @@ def add_bench(bsub) -> None:
                                                              "default: none)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_fidelity)
-    c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (Lambertian DENALI)",
-                CROSSVAL_DESCRIPTION, "nlosplan bench crossval --objects A,circle,3 --sizes 4in,8in --positions 10 --json")
+    c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (DENALI: Lambertian, "
+                "mixed reflectance, mount)", CROSSVAL_DESCRIPTION,
+                "nlosplan bench crossval --models lambertian,mixed,mount --objects A,circle,3 --positions 10 --json")
+    c.add_argument("--models", default="lambertian,mixed,mount",
+                   help="reflectance models, comma-separated: lambertian, mixed, mount (default: %(default)s)")
     c.add_argument("--objects", type=_objects, default=["A", "circle", "3"], metavar="A,S,...",
                    help="DENALI objects (default: A,circle,3)")
     c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",

@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Callable, Iterable, Sequence
@@ -71,6 +72,14 @@ DEFAULT_REFERENCE_POSITIONS = (0, 21, 47, 73, 99)
 DEFAULT_PLOT = "nlosplan-out/bench_simulate.png"
 #: The level whose pruning and arithmetic are studied.
 STUDY_LEVEL = "default"
+#: Scene models timed at the study level and scored against the reference: name -> ``denali_scene`` options.
+#: "mixed": DENALI's Table-2 fit (retroreflective 0.36 on a Lambertian base of 0.2, docs/scene-physics.md);
+#: "mixed+mount": the same with the mount and its plate (0.8) in the signal.
+MODEL_OPTIONS: dict[str, dict] = {
+    "retroreflective": {},
+    "mixed": {"albedo": 0.36, "diffuse_albedo": 0.2},
+    "mixed+mount": {"albedo": 0.36, "diffuse_albedo": 0.2, "mount": True, "mount_in_background": False},
+}
 
 Progress = Callable[[str], None]
 
@@ -103,9 +112,28 @@ def _check_positions(positions: Iterable[int], what: str) -> tuple[int, ...]:
     return tuple(int(p) for p in out)
 
 
-def bench_steps(levels: Sequence[str] = DEFAULT_LEVELS, reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS) -> int:
+def bench_steps(levels: Sequence[str] = DEFAULT_LEVELS, reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS,
+                models: Sequence[str] = tuple(MODEL_OPTIONS)) -> int:
     """Number of ``progress`` calls :func:`bench_simulate` makes (for a progress bar)."""
-    return 2 * len(levels) + 2 * len(reference_positions) + 5
+    parts = sum(_lambertian_parts(MODEL_OPTIONS[m]) for m in models)
+    return 2 * len(levels) + 2 * len(reference_positions) + 5 + len(models) + parts * len(reference_positions)
+
+
+def _lambertian_parts(options: dict) -> int:
+    """Lambertian parts of a model's scene referenced on their own: the diffuse base, the mount and its plate."""
+    base = 1 if options.get("diffuse_albedo", 0.0) > 0 else 0
+    mount = 2 if options.get("mount") and not options.get("mount_in_background", True) else 0
+    return base + mount
+
+
+def _check_models(models: Iterable[str]) -> tuple[str, ...]:
+    out = tuple(models)
+    for m in out:
+        if m not in MODEL_OPTIONS:
+            raise UserError(f"unknown scene model {m!r}; allowed: {', '.join(MODEL_OPTIONS)}")
+    if len(set(out)) != len(out):
+        raise UserError("a scene model is given twice")
+    return out
 
 
 def _warm_and_time(sim: FastSimulator, repeats: int, min_seconds: float) -> tuple[float, float]:
@@ -136,6 +164,7 @@ def bench_simulate(
     study_level: str = STUDY_LEVEL,
     matmul_n: int = MATMUL_N,
     min_seconds: float = 1.0,
+    models: Sequence[str] = tuple(MODEL_OPTIONS),
 ) -> dict:
     """Error against run time of the fast simulator on the DENALI preset.
 
@@ -167,6 +196,9 @@ def bench_simulate(
     min_seconds : float
         Each figure keeps calling for at least this long (the fastest call is
         kept), so that a busy machine has quiet moments to show.
+    models : sequence of str
+        Scene models (:data:`MODEL_OPTIONS`) timed back to back at
+        ``study_level`` and scored against their own reference.
 
     Returns
     -------
@@ -175,9 +207,14 @@ def bench_simulate(
         ``seconds_single``, ``seconds_per_scene_batched``,
         ``scenes_per_second``, ``compile_seconds``, ``rel_l1_error``,
         ``centroid_shift_bins`` and more), ``reference``, ``pruning``,
-        ``arithmetic``, ``machine`` and ``config``.
+        ``arithmetic``, ``models`` (one dict per scene model:
+        ``model``, ``options``, ``scenes_per_second``,
+        ``speed_ratio_vs_retroreflective``, ``rel_l1_error``,
+        ``centroid_shift_bins``, ``paths_per_scene``), ``machine`` and
+        ``config``.
     """
     levels = check_levels(levels)
+    models = _check_models(models)
     check_levels([study_level])
     positions = _check_positions(positions, "position")
     reference_positions = _check_positions(reference_positions, "reference position")
@@ -232,6 +269,8 @@ def bench_simulate(
         err = errors(level_objects[row["fidelity"]], reference["_ref"])
         row.update(rel_l1_error=err["rel_l1_error"], centroid_shift_bins=err["centroid_shift_bins"],
                    errors_per_position=err["per_position"])
+    model_rows = _models(models, objects, sizes, positions, index, reference_positions, reference["_ref"], sensor_cfg,
+                         study_level, dtype, repeats, min_seconds, say)
     reference.pop("_ref")
 
     pruning, study_sim = _pruning(objects, sizes, positions, sensor_cfg, study_level, dtype, repeats, min_seconds, say)
@@ -243,6 +282,7 @@ def bench_simulate(
         "reference": reference,
         "pruning": pruning,
         "arithmetic": arithmetic,
+        "models": model_rows,
         "machine": machine,
         "config": {
             "preset": "denali", "objects": list(objects), "sizes": list(sizes),
@@ -289,10 +329,65 @@ def _reference(scenes, index, reference_positions, sensor, say) -> dict:
     }
 
 
-def _scene(objects: Sequence[str], sizes: Sequence[str], position: int, lights: str = "off"):
+def _scene(objects: Sequence[str], sizes: Sequence[str], position: int, lights: str = "off", **options):
     """The benchmark's scene at a gantry position: objects cycle, sizes change every len(objects) positions."""
     n = len(objects)
-    return denali_scene(objects[position % n], sizes[(position // n) % len(sizes)], position, lights=lights)
+    return denali_scene(objects[position % n], sizes[(position // n) % len(sizes)], position, lights=lights,
+                        **options)
+
+
+def _model_reference(scene, sensor, retro_ref: np.ndarray, retro_albedo: float, say, label: str) -> np.ndarray:
+    """The float64 reference of a model's scene, part by part (the transport is linear in the parts).
+
+    The retroreflective lobe is the main reference (same scene, albedo ``retro_albedo``) scaled to the
+    scene's albedo; every Lambertian part (the object's diffuse base, the mount, the plate) is its own
+    one-object scene at the ``reference`` level with ``diffuse_samples`` surface samples (a Lambertian
+    term with the reference's 16,384 samples needs ~16 GB).
+    """
+    ref_fid = FIDELITY_LEVELS["reference"]
+    lamb_fid = Fidelity(**{**ref_fid.to_dict(), "object_samples": ref_fid.diffuse_samples})
+    obj = scene.objects[0]
+    out = retro_ref * (obj.albedo / retro_albedo)
+    parts = ([dataclasses.replace(obj, reflectance="lambertian", albedo=obj.diffuse_albedo, diffuse_albedo=0.0)]
+             if obj.diffuse_albedo > 0 else []) + [o for o in scene.objects[1:] if not o.fixture]
+    for part in parts:
+        say(f"models: {label} reference, {part.name} ({part.reflectance})")
+        out = out + FastSimulator(scene.replace(objects=(part,)), sensor, fidelity=lamb_fid,
+                                  dtype="float64").expected(parts=True)["object"]
+    return out
+
+
+def _models(models, objects, sizes, positions, index, reference_positions, retro_ref, sensor, level, dtype, repeats,
+            min_seconds, say) -> list[dict]:
+    """Each scene model timed batched at ``level``, back to back, and scored against its float64 reference.
+
+    The retroreflective model reuses the main reference (the same scenes); the others are referenced part
+    by part (:func:`_model_reference`).
+    """
+    rows = []
+    for name in models:
+        opts = MODEL_OPTIONS[name]
+        scenes = [_scene(objects, sizes, p, **opts) for p in positions]
+        say(f"models ({level}): {name}, batched over {len(scenes)} positions")
+        sim = FastSimulator(scenes, sensor, fidelity=level, dtype=dtype)
+        _, best = _warm_and_time(sim, repeats, min_seconds)
+        obj = sim.expected(parts=True)["object"]
+        got = {p: obj[index[p]] for p in reference_positions}
+        if name == "retroreflective":
+            ref = retro_ref
+        else:
+            base = _scene(objects, sizes, reference_positions[0]).objects[0].albedo
+            ref = {p: _model_reference(scenes[index[p]], sensor, retro_ref[p], base, say, f"{name} at position {p}")
+                   for p in reference_positions}
+        err = errors(got, ref)
+        rows.append({"model": name, "options": dict(opts), "level": level, "scenes_per_second": len(scenes) / best,
+                     "seconds_per_scene_batched": best / len(scenes), "paths_per_scene": sim.plan.paths,
+                     "rel_l1_error": err["rel_l1_error"], "centroid_shift_bins": err["centroid_shift_bins"],
+                     "errors_per_position": err["per_position"]})
+    base = next((r for r in rows if r["model"] == "retroreflective"), None)
+    for r in rows:
+        r["speed_ratio_vs_retroreflective"] = r["scenes_per_second"] / base["scenes_per_second"] if base else math.nan
+    return rows
 
 
 def _pruning(objects, sizes, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:

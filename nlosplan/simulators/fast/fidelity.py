@@ -26,6 +26,10 @@ class Fidelity:
         sigma of a Gaussian flash (Lambertian objects, or lobes reaching in).
     object_samples : int
         Stratified, area-weighted surface samples per hidden object.
+    diffuse_samples : int
+        Surface samples of the diffuse (Lambertian) base of a retroreflective
+        object: its return is ~7 % of an equal-albedo retroreflector's, so it
+        needs fewer samples for the same error of the whole signal.
     time_oversample : int
         Time-grid nodes per sensor bin.
     seed : int
@@ -38,6 +42,7 @@ class Fidelity:
     object_samples: int = 384
     time_oversample: int = 4
     seed: int = 0
+    diffuse_samples: int = 128
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -45,8 +50,9 @@ class Fidelity:
             lo = 0 if f.name in ("flash_outer", "seed") else 1
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise UserError(f"fidelity {f.name}={v!r} must be an integer >= {lo}")
-        if self.object_samples > 1_000_000 or self.zone_sub > 64 or self.flash_sub > 64:
-            raise UserError("fidelity too large: object_samples <= 1e6, zone_sub and flash_sub <= 64")
+        if self.object_samples > 1_000_000 or self.diffuse_samples > 1_000_000 or self.zone_sub > 64 \
+                or self.flash_sub > 64:
+            raise UserError("fidelity too large: object_samples and diffuse_samples <= 1e6, zone_sub and flash_sub <= 64")
 
     def to_dict(self) -> dict[str, int]:
         """Plain dictionary of the knobs."""
@@ -57,15 +63,21 @@ class Fidelity:
 #: On DENALI 3x3, relative L1 of the three-bounce part: retroreflective mix against the fast reference
 #: draft ~6 %, low <= 2 %, default 0.3-1.2 % (flash_sub limits small objects), high <= 0.25 %; Lambertian
 #: objects against the converged Mitsuba twin (``nlosplan bench fidelity``) draft ~3 %, low ~0.9 %,
-#: default ~0.6 %, high ~0.6 % (a ~0.5 % floor: the two simulators' systematic difference). Lambertian
+#: default ~0.6 %, high ~0.6 % (a ~0.5 % floor: the two simulators' systematic difference). The reference's
+#: diffuse base has 2,048 samples: a Lambertian term over its 120 x 120 flash cells costs ~1 GB per 1,000 samples
+#: (16,384 ran out of memory), and the base is a few per cent of a mixed object's signal. Lambertian
 #: objects see the wall lit outside the field of view, so the outer flash cells (``flash_outer``,
 #: geometric in width from the zone pitch) set their error: 4 outer cells at default gave 2.7 %.
 FIDELITY_LEVELS: dict[str, Fidelity] = {
-    "draft": Fidelity(zone_sub=2, flash_sub=2, flash_outer=4, object_samples=64, time_oversample=2),
-    "low": Fidelity(zone_sub=3, flash_sub=3, flash_outer=6, object_samples=256, time_oversample=4),
+    "draft": Fidelity(zone_sub=2, flash_sub=2, flash_outer=4, object_samples=64, time_oversample=2,
+                      diffuse_samples=32),
+    "low": Fidelity(zone_sub=3, flash_sub=3, flash_outer=6, object_samples=256, time_oversample=4,
+                    diffuse_samples=64),
     "default": Fidelity(),
-    "high": Fidelity(zone_sub=6, flash_sub=8, flash_outer=12, object_samples=1536, time_oversample=4),
-    "reference": Fidelity(zone_sub=8, flash_sub=24, flash_outer=24, object_samples=16384, time_oversample=8),
+    "high": Fidelity(zone_sub=6, flash_sub=8, flash_outer=12, object_samples=1536, time_oversample=4,
+                     diffuse_samples=512),
+    "reference": Fidelity(zone_sub=8, flash_sub=24, flash_outer=24, object_samples=16384, time_oversample=8,
+                          diffuse_samples=2048),
 }
 
 

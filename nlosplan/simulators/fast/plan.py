@@ -97,6 +97,10 @@ class SimPlan:
         Path evaluations per scene.
     object_index : tuple of int
         Index into ``scene.objects`` of each computed object term.
+    object_albedo : tuple of str
+        Per computed object term, the object attribute that is its albedo
+        (``"albedo"``, or ``"diffuse_albedo"`` for the diffuse base of a
+        retroreflective object, which is a Lambertian term of its own).
     object_samples : tuple of list
         Per computed object term, the surface quadrature of each distinct
         mesh (points, normals, areas; object frame, one padded size).
@@ -116,6 +120,7 @@ class SimPlan:
     fidelity: Fidelity
     paths: int
     object_index: tuple = ()
+    object_albedo: tuple = ()
     object_samples: tuple = ()
     object_mesh_index: tuple = ()
     object_near_index: tuple = ()
@@ -174,12 +179,13 @@ def _check_batch(scenes: list[Scene]) -> None:
             and _same_rect(s.wall, base.wall) and len(s.planes) == len(base.planes)
             and all(_same_rect(a, b) for a, b in zip(s.planes, base.planes))
             and len(s.objects) == len(base.objects)
-            and all(a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg
+            and all(a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg and a.fixture == b.fixture
                     for a, b in zip(s.objects, base.objects))
         )
         if not same:
-            raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes), the number of objects and "
-                            "their reflectance models; object meshes, poses, albedos and lights may differ")
+            raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes), the number of objects, "
+                            "their reflectance models and fixture flags; object meshes, poses, albedos and lights "
+                            "may differ")
 
 
 def _same_rect(a, b) -> bool:
@@ -231,6 +237,36 @@ def _direct_view_zones(scene: Scene, sensor: SensorConfig, points: np.ndarray) -
     col = np.clip(((u[inside][seen] + tu) / (2 * tu) * sensor.zones_cols).astype(int), 0, sensor.zones_cols - 1)
     row = np.clip(((tv - v[inside][seen]) / (2 * tv) * sensor.zones_rows).astype(int), 0, sensor.zones_rows - 1)
     return sorted(set((row * sensor.zones_cols + col).tolist()))
+
+
+def _object_parts(objs: list, fid: Fidelity) -> tuple[list[tuple[str, str, str, Fidelity]], list[Term]]:
+    """The transport terms of one object over a batch, and lines for :func:`explain`.
+
+    Returns
+    -------
+    parts : list of (kind, part name, albedo attribute, fidelity)
+        A retroreflective object with a diffuse base (``diffuse_albedo > 0``
+        in any scene of the batch) gets a second, Lambertian term with the
+        fidelity's ``diffuse_samples`` surface samples; its zero-albedo
+        scenes get exactly zero from it.
+    lines : list of Term
+        A fixture's (it stays in the background capture) and a left-out
+        diffuse base's.
+    """
+    obj = objs[0]
+    parts = [(obj.reflectance, "", "albedo", fid)]
+    lines = []
+    if obj.fixture:
+        lines.append(Term(True, f"object {obj.name!r}: fixture", "moves with the gantry and stays in the background "
+                          "capture (DENALI's NOOBJECT): it is in the capture and the background, not in the signal"))
+    if obj.reflectance == "retroreflective":
+        if any(o.diffuse_albedo > 0 for o in objs):
+            parts.append(("lambertian", "diffuse base", "diffuse_albedo",
+                          dataclasses.replace(fid, object_samples=fid.diffuse_samples)))
+        else:
+            lines.append(Term(False, f"object {obj.name!r}: diffuse base",
+                              "diffuse_albedo 0: a pure retroreflector (no Lambertian term)"))
+    return parts, lines
 
 
 def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool) -> tuple[str, Term]:
@@ -312,14 +348,23 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
 
     obj_plans: list[ObjectPlan] = []
     obj_index: list[int] = []
+    obj_albedo: list[str] = []
     warnings: list[str] = []
+    cells: dict = {}  # wall cells of the plan, built once and shared by every object term
     for k, obj in enumerate(base.objects):
-        plan, notes = plan_object(k, [sc.objects[k] for sc in scenes], base, sensor, fid, zones_out, grid, reach, prune)
-        terms.extend(Term(*n) for n in notes)
-        if plan is not None:
-            obj_plans.append(plan)
-            obj_index.append(k)
-        seen = _direct_view_zones(base, sensor, _dense_world_points([sc.objects[k] for sc in scenes]))
+        objs = [sc.objects[k] for sc in scenes]
+        parts, extra = _object_parts(objs, fid)
+        for i, (kind, part, attr, f) in enumerate(parts):
+            plan, notes = plan_object(k, objs, base, sensor, f, zones_out, grid, reach, prune, kind=kind, part=part,
+                                      cells=cells)
+            terms.extend(Term(*n) for n in notes)
+            if i == 0:
+                terms.extend(extra)
+            if plan is not None:
+                obj_plans.append(plan)
+                obj_index.append(k)
+                obj_albedo.append(attr)
+        seen = _direct_view_zones(base, sensor, _dense_world_points(objs))
         if seen:
             warnings.append(f"object {obj.name!r} is inside the LiDAR's direct field of view (zones "
                             f"{_zone_names(seen, sensor)}): this is "
@@ -376,7 +421,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     paths = int(np.sum(w > 0)) + sum(o.paths for o in obj_plans)
     return SimPlan(static=static, arrays=arrays, zones=zones_out, full_grid=full_grid, terms=tuple(terms),
                    warnings=tuple(warnings), sensor=sensor, fidelity=fid, paths=paths, object_index=tuple(obj_index),
-                   object_samples=tuple(o.samples for o in obj_plans),
+                   object_albedo=tuple(obj_albedo), object_samples=tuple(o.samples for o in obj_plans),
                    object_mesh_index=tuple(o.mesh_index for o in obj_plans),
                    object_near_index=tuple(o.near_index for o in obj_plans))
 

@@ -207,6 +207,9 @@ def plan_object(
     grid: TimeGrid,
     reach_ps: tuple[float, float],
     prune: bool,
+    kind: str | None = None,
+    part: str = "",
+    cells: dict | None = None,
 ) -> tuple[ObjectPlan | None, list]:
     """Plan one object's term for all poses in ``obj_list``.
 
@@ -229,9 +232,20 @@ def plan_object(
         Arrival times that can reach the window through the impulse response.
     prune : bool
         Leave out what cannot contribute (False: compute everything, for tests).
+    kind : {"retroreflective", "lambertian"}, optional
+        The transport of this term (default: the object's reflectance); the
+        diffuse base of a retroreflective object is a ``"lambertian"`` term.
+    part : str
+        Name of the part in :func:`explain` lines (e.g. ``"diffuse base"``).
+    cells : dict, optional
+        Wall cells already built for this plan, by kind and grid knobs,
+        filled here when missing: the terms of one plan share them.
     """
     obj = obj_list[0]
+    kind = obj.reflectance if kind is None else kind
     label = f"object {obj.name!r}" if len({id(o.mesh) for o in obj_list}) == 1 else f"objects ({obj.reflectance})"
+    if part:
+        label = f"{label}: {part}"
     notes: list = []
     groups, mesh_index = _by_mesh(obj_list)
     vis_list = [_visible_faces(g, scene) for g in groups]
@@ -247,12 +261,17 @@ def plan_object(
     n_vis = int(vis_list[0].sum())
     n_faces = len(vis_list[0])
     centers, radii = _bounding_spheres(obj_list)
-    retro = obj.reflectance == "retroreflective"
+    retro = kind == "retroreflective"
     lobe_sigma = math.radians(obj.lobe_fwhm_deg) / FWHM_PER_SIGMA
     lobe = retro and lobe_sigma > 0
 
     ext = flash_extent_tan(sensor)
-    flash = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
+    cells = {} if cells is None else cells
+    key = ("flash", fid.flash_sub, fid.flash_outer)
+    if key not in cells:
+        cells[key] = wall_cells(scene.lidar, scene.wall, scene.planes, sensor,
+                                tangent_cells(sensor, fid.flash_sub, fid.flash_outer, ext), "flash")
+    flash = cells[key]
     zones_set = set(int(z) for z in zones_out)
     row_of = {int(z): i for i, z in enumerate(zones_out)}
     arrays: dict = {"lobe_sigma": np.array(lobe_sigma)}
@@ -288,7 +307,11 @@ def plan_object(
             zone_lo = {z: lo_all for z in zones_set}
             zone_hi = {z: hi_all for z in zones_set}
     else:
-        det = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.zone_sub), "zone")
+        key = ("zone", fid.zone_sub)
+        if key not in cells:
+            cells[key] = wall_cells(scene.lidar, scene.wall, scene.planes, sensor, tangent_cells(sensor, fid.zone_sub),
+                                    "zone")
+        det = cells[key]
         det = det.select(np.isin(det.zone, list(zones_set)))
         t1_lo, t1_hi = _leg_bounds(flash, centers, radii)
         t2_lo, t2_hi = _leg_bounds(det, centers, radii)
@@ -397,7 +420,8 @@ def plan_object(
         fft_len = n1 + n2
         static = ObjectStatic("lambertian", 0, 0, False, len(obj_zones), n1=n1, n2=n2, fft_len=fft_len)
         paths = m * (len(flash) + len(det))
-        how = (f"Lambertian, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
+        what = f"Lambertian (albedo {_albedo_range(obj_list, part)})" if part else "Lambertian"
+        how = (f"{what}, {m} surface samples on {n_vis} of {n_faces} faces; illumination leg {m} x {len(flash)} "
                f"wall cells, detection leg {m} x {len(det)} zone cells, legs convolved in time")
     notes.insert(0, (True, label, how))
     if n_hidden:
@@ -445,6 +469,12 @@ def _pad_cells(static: ObjectStatic, arrays: dict, near_index: dict) -> tuple[Ob
         padded[leg] = [np.concatenate([i, np.full(near[leg] - len(i), size)]).astype(np.int64)
                        for i in near_index[leg]]
     return dataclasses.replace(static, near1=near["1"], near2=near["2"]), padded
+
+
+def _albedo_range(obj_list: list[HiddenObject], part: str) -> str:
+    """The diffuse albedo(s) of a diffuse-base term over the batch, as text."""
+    vals = sorted({o.diffuse_albedo for o in obj_list})
+    return f"{vals[0]:g}" if len(vals) == 1 else f"{vals[0]:g}..{vals[-1]:g}"
 
 
 def _zone_names(zones: list[int], sensor: SensorConfig, limit: int = 8) -> str:

@@ -44,11 +44,23 @@ def sensor_params(sensor: SensorConfig) -> dict:
     return {k: float(getattr(sensor, k)) for k in DYNAMIC_SENSOR_FIELDS}
 
 
-def scene_params(scene: Scene, object_index=None) -> dict:
-    """The dynamic fields of a scene: object poses and albedos, lights."""
-    idx = range(len(scene.objects)) if object_index is None else object_index
+def scene_params(scene: Scene, object_index=None, albedo=None) -> dict:
+    """The dynamic fields of a scene: object poses and albedos, lights.
+
+    Parameters
+    ----------
+    scene : Scene
+    object_index : sequence of int, optional
+        The object of each transport term (default: one term per object).
+    albedo : sequence of str, optional
+        The attribute holding each term's albedo (default ``"albedo"``; the
+        diffuse base of a retroreflective object uses ``"diffuse_albedo"``).
+    """
+    idx = list(range(len(scene.objects)) if object_index is None else object_index)
+    attrs = ["albedo"] * len(idx) if albedo is None else list(albedo)
     return {
-        "objects": [{"to_world": np.asarray(scene.objects[k].to_world), "albedo": scene.objects[k].albedo} for k in idx],
+        "objects": [{"to_world": np.asarray(scene.objects[k].to_world), "albedo": getattr(scene.objects[k], a)}
+                    for k, a in zip(idx, attrs)],
         "lights": 1.0 if scene.lights_on else 0.0,
     }
 
@@ -130,7 +142,7 @@ class FastSimulator:
         near-wall coupling (``near1``, ``near2``) of every scene.
         """
         plan = self.plan
-        per_scene = [scene_params(s, plan.object_index) for s in self.scenes]
+        per_scene = [scene_params(s, plan.object_index, plan.object_albedo) for s in self.scenes]
         for k, (samples, index) in enumerate(zip(plan.object_samples, plan.object_mesh_index)):
             near = plan.object_near_index[k]
             for j, (sp, i) in enumerate(zip(per_scene, index)):

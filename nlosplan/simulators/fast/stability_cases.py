@@ -19,6 +19,7 @@ from nlosplan.sensor_models.presets import preset
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 from nlosplan.simulators.fast.fidelity import Fidelity
 from nlosplan.simulators.fast.simulator import FastSimulator, to_jax
+from nlosplan.simulators.fast.stability_scene import mixed, mount_near_wall_check, mount_near_wall_scenes
 from nlosplan.simulators.fast.transport import forward
 from nlosplan.simulators.presets import corner_scene, denali_scene
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh
@@ -133,6 +134,10 @@ _SCENARIOS = {
     # the gradient check's 1 mm scenes (in view and out of view) at the cheap fidelity
     "near-wall-1mm": lambda: (_one_mm_scenes("lambertian"), _base_sensor(), FID, "float64"),
     "near-wall-1mm-retro": lambda: (_one_mm_scenes("retroreflective"), _base_sensor(), FID, "float64"),
+    "near-wall-mixed": lambda: (mixed(_near_wall_scenes("retroreflective")), _base_sensor(), "default", "float64"),
+    "near-wall-1mm-mixed": lambda: (mixed(_one_mm_scenes("retroreflective")), _base_sensor(), FID, "float64"),
+    "edge-on-mixed": lambda: (mixed(_edge_on_scenes("retroreflective")), _base_sensor(), FID, "float64"),
+    "mount-near-wall": lambda: (mount_near_wall_scenes(HEIGHTS), _base_sensor(), FID, "float64"),
     "beyond-window": lambda: (corner_scene(object_xy=(0.45, 10.0), wall_size=(20.0, 10.0)), _base_sensor(), FID,
                               "float64"),
     "beyond-window-background": lambda: (corner_scene(object_xy=(0.45, 10.0), wall_size=(20.0, 10.0))
@@ -143,10 +148,12 @@ _SCENARIOS = {
                           "float64"),
     "zero-area-clean": lambda: (corner_scene(object=_clean_mesh(), object_xy=(0.45, 0.3)), _base_sensor(), FID,
                                 "float64"),
-    "zones-1x1": lambda: (denali_scene(), _base_sensor().replace(zones_rows=1, zones_cols=1), _zones_fidelity(1),
-                          "float64"),
-    "zones-3x3": lambda: (denali_scene(), _base_sensor(), _zones_fidelity(3), "float64"),
-    "zones-16x16": lambda: (denali_scene(), _base_sensor().replace(zones_rows=16, zones_cols=16),
+    # the zone grids compare the transport's object counts summed over zones: a linear sensor alike in every zone
+    # (the 3x3 preset's per-zone gains, pile-up and time walk belong to one unit's 3x3 layout)
+    "zones-1x1": lambda: (denali_scene(), _base_sensor().linear_uniform().replace(zones_rows=1, zones_cols=1),
+                          _zones_fidelity(1), "float64"),
+    "zones-3x3": lambda: (denali_scene(), _base_sensor().linear_uniform(), _zones_fidelity(3), "float64"),
+    "zones-16x16": lambda: (denali_scene(), _base_sensor().linear_uniform().replace(zones_rows=16, zones_cols=16),
                             _zones_fidelity(16), "float64"),
     "fov-1deg": lambda: (denali_scene(), _base_sensor().replace(fov_x_deg=1.0, fov_y_deg=1.0), FID, "float64"),
     "fov-33deg": lambda: (denali_scene(), _base_sensor(), FID, "float64"),
@@ -231,8 +238,10 @@ def near_wall_check(out: dict, reflectance: str) -> tuple[bool, str]:
 
 
 def _near_wall(reflectance: str):
-    name = "near-wall-lambertian" if reflectance == "lambertian" else "near-wall-retro"
-    return lambda: near_wall_check(_parts(name), reflectance)
+    name = {"lambertian": "near-wall-lambertian", "retroreflective": "near-wall-retro", "mixed": "near-wall-mixed"}[
+        reflectance]
+    label = "mixed (retroreflective 0.5 + Lambertian 0.5)" if reflectance == "mixed" else reflectance
+    return lambda: near_wall_check(_parts(name), label)
 
 
 # --------------------------------------------------------------- 2. beyond the window
@@ -251,12 +260,15 @@ def _beyond_window():
 
 
 # --------------------------------------------------------------- 3. grazing
-def _edge_on():
-    out = _parts("edge-on")
-    obj = np.asarray(out["object"]).reshape(2, -1).sum(-1)
-    return _all_ok(out) and obj[1] > 0, (f"Lambertian 10 cm patch 0.3 m from the wall: object {obj[0]:.3g} counts "
-                                         f"face-on, {obj[1]:.3g} turned 89.9 deg (its face looks along the wall, "
-                                         "towards the field of view); all finite, >= 0")
+def _edge_on(name: str = "edge-on", what: str = "Lambertian"):
+    def run():
+        out = _parts(name)
+        obj = np.asarray(out["object"]).reshape(2, -1).sum(-1)
+        return _all_ok(out) and obj[1] > 0, (f"{what} 10 cm patch 0.3 m from the wall: object {obj[0]:.3g} counts "
+                                             f"face-on, {obj[1]:.3g} turned 89.9 deg (its face looks along the wall, "
+                                             "towards the field of view); all finite, >= 0")
+
+    return run
 
 
 def _fov120_zones():
@@ -353,7 +365,7 @@ def _dynamic_range():
 # --------------------------------------------------------------- 8. gradients
 #: Scenarios of the gradient check (every scene of a batch: they share one compiled gradient). The sensor gets
 #: 30 ps of jitter so the Gaussian impulse response, and its width, are traced.
-GRADIENT_SCENARIOS = ("near-wall-1mm", "near-wall-1mm-retro", "beyond-window", "grazing-wall",
+GRADIENT_SCENARIOS = ("near-wall-1mm", "near-wall-1mm-retro", "near-wall-1mm-mixed", "beyond-window", "grazing-wall",
                       "zero-area", "zones-1x1", "zones-16x16", "fov-1deg", "fov-120deg")
 GRADIENT_JITTER_PS = 30.0
 
@@ -461,9 +473,16 @@ CASES: list[Case] = [
     Case("object-1mm-retro", "5 cm retroreflective patch 1, 2, 5 mm from the wall: finite, >= 0, <= direct; in view "
          "changes < 2x per step; out of view falls as h^p, 1 <= p <= 3.5 (grazing exchange), never grows",
          _near_wall("retroreflective")),
+    Case("object-1mm-mixed", "5 cm mixed patch (retroreflective 0.5 + Lambertian 0.5) 1, 2, 5 mm from the wall: "
+         "finite, >= 0, <= direct; in view changes < 2x per step; out of view falls as h^p, 1 <= p <= 3.5",
+         _near_wall("mixed")),
+    Case("mount-1mm", "DENALI object with its mount and plate in the signal, 1, 2, 5 mm from the wall: finite, >= 0, "
+         "<= direct, changes < 2x per step", lambda: mount_near_wall_check(_parts("mount-near-wall"), HEIGHTS)),
     Case("object-beyond-window", "object 10 m away: term left out for the time window, histogram equals the "
          "background (1e-6), unpruned object part 0 in the window", _beyond_window),
-    Case("grazing-object", "patch turned 89.9 deg (face almost perpendicular to the wall): finite, >= 0", _edge_on),
+    Case("grazing-object", "patch turned 89.9 deg (face almost perpendicular to the wall): finite, >= 0", _edge_on()),
+    Case("grazing-object-mixed", "mixed patch (retroreflective + Lambertian) turned 89.9 deg: finite, >= 0",
+         _edge_on("edge-on-mixed", "mixed (retroreflective 0.5 + Lambertian 0.5)")),
     Case("grazing-fov-120deg", "120 deg FoV on the DENALI rig (zones miss the wall): finite, >= 0", _fov120_zones),
     Case("grazing-relay-wall", "LiDAR 85 deg from the wall normal (sub-rays miss it): finite, >= 0", _grazing_wall),
     Case("zero-area-triangles", "degenerate faces added to a patch: finite, equal to the clean patch (1e-6)",
@@ -477,7 +496,7 @@ CASES: list[Case] = [
          "in the pulse tail): float32 object part and counts within 1e-3 of float64, signal within 1e-3 sqrt(counts)",
          _dynamic_range),
     Case("gradients-transport", "jax.grad w.r.t. object translation, jitter and bin width finite: 1 mm (Lambertian, "
-         "retro), beyond window, grazing wall, zero-area, 1x1, 16x16, FoV 1 and 120 deg", _gradients),
+         "retro, mixed), beyond window, grazing wall, zero-area, 1x1, 16x16, FoV 1 and 120 deg", _gradients),
     Case("reject-bad-mesh", "NaN vertices, no vertices, no triangles, NaN pose: one-line UserError naming the problem",
          _reject_bad_meshes),
     Case("reject-zone-outside-grid", "zones=[(5, 5)] on 3x3 rejected with one line", _reject_zones),

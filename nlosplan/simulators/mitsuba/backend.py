@@ -48,9 +48,10 @@ class TwinBackend:
                  prune=None, seed: int = 0, variant: str = "auto", illumination: str = "flash") -> SimulationResult:
         """Expected capture, NOOBJECT background, signal, parts and optional noisy captures, by the twin.
 
-        The background is the same render without the three-bounce term (the
-        twin's direct wall return does not depend on the hidden objects), so the
-        signal is exactly the object's three-bounce counts through the pipeline.
+        The background is the same render without the hidden objects'
+        three-bounce term (the twin's direct wall return does not depend on
+        them); fixtures (the mount) stay in it, so the signal is exactly the
+        objects' three-bounce counts through the pipeline.
 
         Returns
         -------

@@ -18,12 +18,15 @@ Registered by :func:`register` once a variant is set (never at import).
     next-event estimation a copy.
 
 ``nlosplan_retro``
-    A retroreflector: of the irradiance ``E`` arriving from ``w_l`` a fraction
-    ``albedo`` is sent back in a von Mises-Fisher lobe ``p(w)`` around ``w_l``
-    (``kappa = 1 / sigma^2``, ``sigma = FWHM / 2.3548`` in radians), the
-    model of the fast backend. Outgoing radiance ``L(w_c) = albedo p(w_c) E /
-    cos(w_c)``, so Mitsuba's ``eval`` (``f cos`` of the light-side direction)
-    is ``albedo p cos(w_l) / cos(w_c)``; ``sample`` draws the lobe exactly.
+    A retroreflector on a Lambertian base: of the irradiance ``E`` arriving
+    from ``w_l`` a fraction ``albedo`` is sent back in a von Mises-Fisher
+    lobe ``p(w)`` around ``w_l`` (``kappa = 1 / sigma^2``, ``sigma = FWHM /
+    2.3548`` in radians) and a fraction ``diffuse`` is scattered diffusely,
+    the model of the fast backend. Outgoing radiance ``L(w_c) = albedo
+    p(w_c) E / cos(w_c) + diffuse E / pi``, so Mitsuba's ``eval`` (``f cos``
+    of the light-side direction) is ``albedo p cos(w_l) / cos(w_c) + diffuse
+    cos(w_l) / pi``; ``sample`` picks the lobe or the cosine hemisphere in
+    proportion to the two albedos and weights by the mixture's pdf.
 """
 
 from __future__ import annotations
@@ -83,10 +86,14 @@ def register(mi) -> None:
         def __init__(self, props):
             super().__init__(props)
             self.albedo = float(props.get("albedo", 0.5))
+            self.diffuse = float(props.get("diffuse", 0.0))
             self.kappa = float(props.get("kappa", 1000.0))
-            reflection_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-            self.m_components = [reflection_flags]
-            self.m_flags = reflection_flags
+            total = self.albedo + self.diffuse
+            self.p_lobe = self.albedo / total if total > 0 else 1.0  # probability of sampling the lobe
+            glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+            diffuse = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [glossy, diffuse] if self.diffuse > 0 else [glossy]
+            self.m_flags = (glossy | diffuse) if self.diffuse > 0 else glossy
 
         def _lobe(self, wi, wo):
             k = self.kappa
@@ -101,28 +108,44 @@ def register(mi) -> None:
             w = dr.clip(w, -1.0, 1.0)
             s = dr.sqrt(dr.maximum(1.0 - w * w, 0.0))
             phi = 2.0 * math.pi * sample2.y
-            local = mi.Vector3f(s * dr.cos(phi), s * dr.sin(phi), w)
-            wo = mi.Frame3f(si.wi).to_world(local)
+            lobe_wo = mi.Frame3f(si.wi).to_world(mi.Vector3f(s * dr.cos(phi), s * dr.sin(phi), w))
+            if self.diffuse > 0:  # the component is chosen with sample1, as Mitsuba's own mixtures do
+                pick_lobe = sample1 < self.p_lobe
+                wo = dr.select(pick_lobe, lobe_wo, mi.warp.square_to_cosine_hemisphere(sample2))
+            else:
+                pick_lobe = mi.Bool(True)
+                wo = lobe_wo
             cos_o = mi.Frame3f.cos_theta(wo)
             ok = active & (cos_i > 0) & (cos_o > 0)
             bs = dr.zeros(mi.BSDFSample3f)
             bs.wo = wo
-            bs.pdf = dr.select(ok, self._lobe(si.wi, wo), 0.0)
+            bs.pdf = dr.select(ok, self._pdf(si.wi, wo, cos_o), 0.0)
             bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
-            weight = dr.select(ok, self.albedo * cos_o / dr.maximum(cos_i, 1e-12), 0.0)
+            bs.sampled_type = dr.select(pick_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                        mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+            bs.sampled_component = dr.select(pick_lobe, mi.UInt32(0), mi.UInt32(1))
+            value = self._value(si.wi, wo, cos_i, cos_o)
+            weight = dr.select(ok, value / dr.maximum(bs.pdf, 1e-30), 0.0)
             return bs, mi.Spectrum(weight)
+
+        def _value(self, wi, wo, cos_i, cos_o):
+            """``f cos(wo)``: the lobe's ``albedo p cos_o / cos_i`` plus the base's ``diffuse cos_o / pi``."""
+            val = self.albedo * self._lobe(wi, wo) * cos_o / dr.maximum(cos_i, 1e-12)
+            return val + self.diffuse * cos_o / math.pi if self.diffuse > 0 else val
+
+        def _pdf(self, wi, wo, cos_o):
+            lobe = self._lobe(wi, wo)
+            return self.p_lobe * lobe + (1.0 - self.p_lobe) * cos_o / math.pi if self.diffuse > 0 else lobe
 
         def eval(self, ctx, si, wo, active=True):
             cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
             ok = active & (cos_i > 0) & (cos_o > 0)
-            val = self.albedo * self._lobe(si.wi, wo) * cos_o / dr.maximum(cos_i, 1e-12)
-            return mi.Spectrum(dr.select(ok, val, 0.0))
+            return mi.Spectrum(dr.select(ok, self._value(si.wi, wo, cos_i, cos_o), 0.0))
 
         def pdf(self, ctx, si, wo, active=True):
-            ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            return dr.select(ok, self._lobe(si.wi, wo), 0.0)
+            cos_o = mi.Frame3f.cos_theta(wo)
+            ok = active & (mi.Frame3f.cos_theta(si.wi) > 0) & (cos_o > 0)
+            return dr.select(ok, self._pdf(si.wi, wo, cos_o), 0.0)
 
         def eval_pdf(self, ctx, si, wo, active=True):
             return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -134,7 +157,7 @@ def register(mi) -> None:
             """Nothing is cached from parameters, so nothing to update."""
 
         def to_string(self):
-            return f"NlosplanRetro[albedo={self.albedo}, kappa={self.kappa}]"
+            return f"NlosplanRetro[albedo={self.albedo}, diffuse={self.diffuse}, kappa={self.kappa}]"
 
     mi.register_integrator("nlosplan_nlos_path", lambda props: NlosPath(props))
     mi.register_sensor("nlosplan_point_meter", lambda props: PointMeter(props))

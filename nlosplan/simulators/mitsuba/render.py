@@ -55,7 +55,8 @@ def _bsdf(obj: HiddenObject) -> dict:
     if obj.lobe_fwhm_deg <= 0:
         raise UserError(f"object {obj.name!r}: the mitsuba backend needs a retroreflective lobe > 0 deg "
                         "(a mirror-exact retroreflector has no finite BSDF)")
-    return {"type": "nlosplan_retro", "albedo": obj.albedo, "kappa": vmf_kappa(obj.lobe_fwhm_deg)}
+    return {"type": "nlosplan_retro", "albedo": obj.albedo, "diffuse": obj.diffuse_albedo,
+            "kappa": vmf_kappa(obj.lobe_fwhm_deg)}
 
 
 def object_mesh(mi, obj: HiddenObject):
@@ -95,11 +96,12 @@ def projector(mi, scene: Scene, texture: FlashTexture | None, aim=None) -> dict:
 
 
 def scene_dict(mi, scene: Scene, det: Detection, axis: tuple[float, float, int], *, spp: int, three_bounce: bool,
-               emitter: dict, laser: bool = False) -> tuple[dict, str]:
+               emitter: dict, laser: bool = False, objects=None) -> tuple[dict, str]:
     """The Mitsuba scene of one render; returns it and the key of its meter points in ``POINT_SETS``.
 
-    ``three_bounce``: the hidden objects' three-bounce return (hidden-geometry
-    sampling at x2); otherwise the direct wall return alone (no objects).
+    ``three_bounce``: the three-bounce return of ``objects`` (default: all of
+    the scene's hidden objects; hidden-geometry sampling at x2); otherwise
+    the direct wall return alone (no objects).
     """
     wall = scene.wall
     key = uuid.uuid4().hex
@@ -127,7 +129,7 @@ def scene_dict(mi, scene: Scene, det: Detection, axis: tuple[float, float, int],
         "flash": emitter,
     }
     if three_bounce:
-        for k, obj in enumerate(scene.objects):
+        for k, obj in enumerate(scene.objects if objects is None else objects):
             d[f"hidden_{k:02d}"] = object_mesh(mi, obj)
     return d, key
 

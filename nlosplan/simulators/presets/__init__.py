@@ -9,6 +9,6 @@
 """
 
 from nlosplan.simulators.presets.corner import corner_scene
-from nlosplan.simulators.presets.denali import denali_scene, mount_mesh, object_mesh, rig, scene_at
+from nlosplan.simulators.presets.denali import MOUNT_ALBEDO, denali_scene, mount_mesh, object_mesh, plate_mesh, rig, scene_at
 
-__all__ = ["corner_scene", "denali_scene", "mount_mesh", "object_mesh", "rig", "scene_at"]
+__all__ = ["MOUNT_ALBEDO", "corner_scene", "denali_scene", "mount_mesh", "object_mesh", "plate_mesh", "rig", "scene_at"]

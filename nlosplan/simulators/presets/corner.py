@@ -83,7 +83,8 @@ def _object_mesh(obj: Any, size: float) -> tuple[Mesh, np.ndarray, str]:
 def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: Any = "patch",
                  object_size: float = 0.10, reflectance: str = "lambertian", albedo: float = 0.5,
                  lobe_fwhm_deg: float = 2.0, lights_on: bool = False, wall_size=(1.2, 0.8),
-                 wall_albedo: float = 0.8, yaw_deg: float = 0.0, floor_z: float | None = None) -> Scene:
+                 wall_albedo: float = 0.8, yaw_deg: float = 0.0, floor_z: float | None = None,
+                 diffuse_albedo: float = 0.0) -> Scene:
     """A generic corner scene.
 
     Parameters
@@ -116,6 +117,9 @@ def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: 
     floor_z : float, optional
         Add a 3 x 3 m floor (albedo 0.3, lit side up) at this height, metres
         (below the LiDAR: < 0). The floor spans y from -3 m to the wall.
+    diffuse_albedo : float
+        Lambertian base of a retroreflective object (0: none; ``albedo +
+        diffuse_albedo <= 1``).
 
     Returns
     -------
@@ -155,7 +159,7 @@ def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: 
     rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     to_world = rigid_transform(rz @ orient, (x, -y, 0.0))
     hidden = HiddenObject(mesh=mesh, to_world=to_world, reflectance=reflectance, albedo=albedo,
-                          lobe_fwhm_deg=lobe_fwhm_deg, name=label)
+                          lobe_fwhm_deg=lobe_fwhm_deg, name=label, diffuse_albedo=diffuse_albedo)
 
     planes: tuple[Rect, ...] = ()
     if floor_z is not None:
@@ -166,7 +170,8 @@ def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: 
                               height=FLOOR_SIZE, albedo=FLOOR_ALBEDO, name="floor"),)
 
     meta = {"preset": "corner", "object": label, "object_xy": [x, y], "wall_distance": d, "reflectance": reflectance,
-            "albedo": hidden.albedo, "lobe_fwhm_deg": hidden.lobe_fwhm_deg, "object_yaw_deg": float(yaw_deg),
+            "albedo": hidden.albedo, "lobe_fwhm_deg": hidden.lobe_fwhm_deg, "diffuse_albedo": hidden.diffuse_albedo,
+            "object_yaw_deg": float(yaw_deg),
             "object_size": float(object_size), "lights": "on" if lights_on else "off"}
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=(hidden,), lights_on=bool(lights_on),
                  name=f"corner {label} at ({x:g}, {y:g}) m", meta=meta)

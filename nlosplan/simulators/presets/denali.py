@@ -8,11 +8,25 @@ LiDAR from the co-located camera, the relay wall from tag 5, the tables from
 tags 14 and 15, the object meshes (loaded by :mod:`nlosplan.simulators.meshes`)
 at their poses.
 
+Mount
+-----
+The object mount (``object_mount.obj``, a 7.6 x 7.5 cm post from the table
+up to the object) and its plate (``object_mount_plate.obj``, with tag 1 on
+it) move with the gantry. DENALI's twin places the plate at ``T(tag 1) .
+Rx(-90 deg)`` and the mount at the object's pose, both diffuse 0.8 (its
+``PARTS_REFL``, visual pass only). ``mount=True`` adds the two as separate
+objects (the plate overlaps the post). DENALI names the post "object mount",
+so its background capture ``NOOBJECTMOUNT`` most likely has no mount and
+``NOOBJECT`` the bare mount: the mount is a fixture (kept in the background)
+by default.
+
 Assumptions (to be calibrated against captures)
 -----------------------------------------------
-- Object albedo 0.5 and a 2 deg FWHM retroreflective lobe.
+- Object albedo 0.5 and a 2 deg FWHM retroreflective lobe, no diffuse base
+  (DENALI's Table 2 cannot separate a diffuse base from the retroreflective
+  part: see ``docs/scene-physics.md``).
 - Relay-wall albedo 0.8 and table albedo 0.5 (the twin's table colour is
-  (0.6, 0.5, 0.4)); the object mount is Lambertian with albedo 0.8.
+  (0.6, 0.5, 0.4)); the mount and plate are Lambertian with albedo 0.8.
 - The TMF8828 zone grid looks like the co-located camera image: sensor
   right = camera x, up = -camera y, zone row 0 at the top of the image.
 """
@@ -30,7 +44,9 @@ from nlosplan.errors import UserError
 from nlosplan.simulators.meshes import load_obj
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene
 
-__all__ = ["denali_scene", "mount_mesh", "object_mesh", "rig", "scene_at"]
+__all__ = ["MOUNT_ALBEDO", "denali_scene", "mount_mesh", "object_mesh", "plate_mesh", "rig", "scene_at"]
+
+MOUNT_ALBEDO = 0.8  # DENALI twin's PARTS_REFL (diffuse) for the mount and plate
 
 
 def _load_packaged(relpath: str, name: str) -> Mesh:
@@ -64,8 +80,22 @@ def object_mesh(obj: str, size: str) -> Mesh:
 
 @lru_cache(maxsize=None)
 def mount_mesh() -> Mesh:
-    """Mesh of the object mount (the post that holds the object), metres, object frame."""
+    """Mesh of the object mount (the 33 cm post from the table up to the object), metres, object frame.
+
+    Place it with :func:`nlosplan.denali.object_pose`.
+    """
     return _load_packaged("object_mount.obj", name="object_mount")
+
+
+@lru_cache(maxsize=None)
+def plate_mesh() -> Mesh:
+    """Mesh of the mount plate (8 x 8 x 1 cm, tag 1 on it), metres, in tag 1's z-up frame.
+
+    Place it with :func:`nlosplan.denali.plate_pose`. It overlaps the top of
+    the post, so it is a separate object (the twin renders overlapping
+    meshes apart).
+    """
+    return _load_packaged("object_mount_plate.obj", name="object_mount_plate")
 
 
 def _wall(albedo: float) -> Rect:
@@ -144,7 +174,8 @@ def _check_lights(lights: Any) -> bool:
 
 def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: str | bool = "off", *,
                  reflectance: str = "retroreflective", albedo: float = 0.5, lobe_fwhm_deg: float = 2.0,
-                 mount: bool = False, wall_albedo: float = 0.8, table_albedo: float = 0.5,
+                 diffuse_albedo: float = 0.0, mount: bool = False, mount_albedo: float = MOUNT_ALBEDO,
+                 mount_in_background: bool = True, wall_albedo: float = 0.8, table_albedo: float = 0.5,
                  tables: bool = True) -> Scene:
     """One DENALI capture as a scene.
 
@@ -160,8 +191,19 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     reflectance : {"retroreflective", "lambertian"}
         Object reflectance model; ``albedo`` and ``lobe_fwhm_deg`` (degrees)
         are its parameters (assumed values by default).
+    diffuse_albedo : float
+        Lambertian base of a retroreflective object (0: pure retroreflector;
+        ``albedo + diffuse_albedo <= 1``).
     mount : bool
-        Add the object mount as a second, Lambertian (albedo 0.8) object.
+        Add the object mount and its plate (:func:`mount_mesh`,
+        :func:`plate_mesh`, Lambertian) as two more objects that move with
+        the gantry.
+    mount_albedo : float
+        The mount's Lambertian albedo (DENALI's twin: 0.8).
+    mount_in_background : bool
+        The mount is a fixture that stays in the background capture (DENALI's
+        NOOBJECT with the bare mount: it cancels from the signal); False
+        leaves it in the signal (a background without the mount).
     wall_albedo, table_albedo : float
         Relay-wall and table albedos.
     tables : bool
@@ -192,28 +234,35 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
     lidar, wall, planes = rig(wall_albedo=wall_albedo, table_albedo=table_albedo, tables=tables)
     pose = denali.object_poses()[p]
     objects = [HiddenObject(mesh=object_mesh(name, size), to_world=pose, reflectance=reflectance,
-                            albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}")]
+                            albedo=albedo, lobe_fwhm_deg=lobe_fwhm_deg, name=f"{name}_{size}",
+                            diffuse_albedo=diffuse_albedo)]
+    if not isinstance(mount, (bool, np.bool_)) or not isinstance(mount_in_background, (bool, np.bool_)):
+        raise UserError("mount and mount_in_background must be true or false")
     if mount:
-        objects.append(HiddenObject(mesh=mount_mesh(), to_world=pose, reflectance="lambertian",
-                                    albedo=0.8, name="object mount"))
+        for mesh, to_world, label in ((mount_mesh(), pose, "object mount"),
+                                      (plate_mesh(), denali.plate_pose(pose), "mount plate")):
+            objects.append(HiddenObject(mesh=mesh, to_world=to_world, reflectance="lambertian", albedo=mount_albedo,
+                                        name=label, fixture=bool(mount_in_background)))
     xy = denali.tag1_positions()[p, :2]
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": denali.class_group(name),
         "lights": "on" if on else "off", "object_xy": [float(xy[0]), float(xy[1])], "reflectance": reflectance,
-        "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg, "mount": bool(mount),
+        "albedo": objects[0].albedo, "lobe_fwhm_deg": objects[0].lobe_fwhm_deg,
+        "diffuse_albedo": objects[0].diffuse_albedo, "mount": bool(mount),
+        **({"mount_albedo": objects[1].albedo, "mount_in_background": bool(mount_in_background)} if mount else {}),
         "wall_albedo": wall.albedo, "tables": bool(tables),
     }
     return Scene(lidar=lidar, wall=wall, planes=planes, objects=tuple(objects), lights_on=on,
                  name=f"denali {name}_{size} p{p:02d} lights {meta['lights']}", meta=meta)
 
 
-def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off"):
+def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off", **scene_kw):
     """The DENALI scene with the object at gantry (x, y) mm (any point, not only the grid).
 
     Parameters
     ----------
-    obj, size, lights
-        As :func:`denali_scene`.
+    obj, size, lights, **scene_kw
+        As :func:`denali_scene` (keyword arguments: reflectance, albedos, mount, ...).
     x_mm, y_mm : float
         Gantry position, millimetres.
 
@@ -223,9 +272,11 @@ def scene_at(obj: str, size: str, x_mm: float, y_mm: float, lights: str = "off")
         ``meta`` has ``position`` (the grid index, or -1 off the grid),
         ``object_xy`` (:func:`nlosplan.denali.geometry.label_xy`) and ``gantry_mm``.
     """
-    base = denali_scene(obj, size, 0, lights)
+    base = denali_scene(obj, size, 0, lights, **scene_kw)
     pose = denali.object_pose_mm(x_mm, y_mm)
+    plate = denali.plate_pose(pose)
     meta = {**base.meta, "position": denali.grid_index(x_mm, y_mm), "object_xy": list(denali.label_xy(x_mm, y_mm)),
             "gantry_mm": [float(x_mm), float(y_mm)]}
-    return base.replace(objects=tuple(o.moved_to(pose) for o in base.objects), meta=meta,
+    moved = tuple(o.moved_to(plate if o.name == "mount plate" else pose) for o in base.objects)
+    return base.replace(objects=moved, meta=meta,
                         name=f"denali {base.objects[0].name} at ({float(x_mm):.1f}, {float(y_mm):.1f}) mm")
