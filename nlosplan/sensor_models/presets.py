@@ -24,8 +24,12 @@ Where a value has no source it is marked "assumed" in the preset's notes.
 
 from __future__ import annotations
 
-from nlosplan.errors import UserError
-from nlosplan.sensor_models.config import SensorConfig
+import dataclasses
+from pathlib import Path
+
+from nlosplan.errors import UserError, check_keys
+from nlosplan.schema import load_table
+from nlosplan.sensor_models.config import ZONE_FIELDS, SensorConfig
 
 #: Values measured from ../shared/data/tmf882x_distance (TMF882x, 3x3, short
 #: range). Regenerate with ``nlosplan sensor fit-timebase PATH``.
@@ -219,11 +223,76 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
+#: Fields a sensor file without ``base`` may leave out (labels, and the optional measured pulse).
+#: Fields a complete sensor file may leave out: the labels, and the optional terms whose unset value (None) means
+#: "not modelled" (a measured pulse shape, per-zone terms, dead time), never a generic number.
+OPTIONAL_FILE_FIELDS = ("name", "notes") + tuple(f.name for f in dataclasses.fields(SensorConfig) if f.default is None)
+
+
+def load_sensor_file(path) -> SensorConfig:
+    """Read a ``.toml`` or ``.json`` sensor file: its ``base`` preset with the fields it gives, or every field.
+
+    A file either names the preset it refines (``base = "tmf8828-3x3-short"``;
+    the fields it gives replace the preset's, so fields added to the model
+    later take the preset's values) or gives every field but
+    :data:`OPTIONAL_FILE_FIELDS`. Nothing is filled in silently: an empty or
+    partial file without ``base``, an unknown or missing field and a wrong
+    type are errors naming the file and the field.
+
+    Raises
+    ------
+    UserError
+        The file cannot be read as text or does not parse, or its
+        configuration is incomplete or invalid (one line).
+    """
+    path = Path(path)
+    data = load_table(path, "sensor file")
+    try:
+        return _from_table(data, path)
+    except UserError as exc:
+        raise UserError(f"sensor file {path}: {exc}") from None
+
+
+def _from_table(data: dict, path: Path) -> SensorConfig:
+    fields = sorted(f.name for f in dataclasses.fields(SensorConfig))
+    data = dict(data)
+    base = data.pop("base", None)
+    check_keys(data, ["base", *fields], "field(s)")
+    for name in ("pulse_shape",) + ZONE_FIELDS:
+        if isinstance(data.get(name), list):
+            data[name] = tuple(data[name])
+    if base is not None:
+        if not isinstance(base, str) or base not in PRESET_NAMES:
+            raise UserError(f"base = {base!r} is not a sensor preset; allowed: {', '.join(PRESET_NAMES)}")
+        data.setdefault("name", f"{path.stem} ({base})")
+        return preset(base).replace(**data)
+    missing = [f for f in fields if f not in data and f not in OPTIONAL_FILE_FIELDS]
+    if missing:
+        what = "is empty" if not data else f"misses {', '.join(missing)}"
+        raise UserError(f"the file {what}; name the preset it refines (e.g. base = \"{PRESET_NAMES[0]}\"; "
+                        f"presets: {', '.join(PRESET_NAMES)}) or give every field")
+    data.setdefault("name", path.stem)
+    return SensorConfig(**data)
+
+
+def sensor_base(spec) -> str | None:
+    """The preset a sensor spec refines: the preset's own name, a sensor file's ``base``, else None."""
+    if isinstance(spec, SensorConfig):
+        return spec.name if spec.name in PRESET_NAMES and spec == preset(spec.name) else None
+    spec = str(spec)
+    if spec.endswith((".toml", ".json")):
+        base = load_table(spec, "sensor file").get("base")
+        return base if isinstance(base, str) and base in PRESET_NAMES else None
+    return spec if spec in PRESET_NAMES else None
+
+
 def resolve_sensor(spec) -> SensorConfig:
     """A preset name or a path to a ``.toml``/``.json`` sensor file (a :class:`SensorConfig` is returned as it is)."""
     if isinstance(spec, SensorConfig):
         return spec
     spec = str(spec)
     if spec.endswith((".toml", ".json")):
-        return SensorConfig.load(spec)
+        return load_sensor_file(spec)
+    if spec not in PRESET_NAMES and Path(spec).exists():
+        raise UserError(f"sensor file {spec} must end in .toml or .json (or give a preset: {', '.join(PRESET_NAMES)})")
     return preset(spec)
