@@ -159,6 +159,24 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
+def uncertainty(name: str) -> dict | None:
+    """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
+    :mod:`nlosplan.sensor_models.uncertainty`), or None.
+
+    No preset ships one today: their measured values carry line-fit errors
+    only (:data:`MEASURED`), not a calibration's joint uncertainty. The design
+    planner's worlds then draw only from their declared ranges.
+
+    Raises
+    ------
+    UserError
+        For an unknown preset name.
+    """
+    if name not in _builders():
+        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(_builders())}")
+    return None
+
+
 def resolve_sensor(spec) -> SensorConfig:
     """A preset name or a path to a ``.toml``/``.json`` sensor file (a :class:`SensorConfig` is returned as it is)."""
     if isinstance(spec, SensorConfig):
