@@ -229,3 +229,18 @@ def test_a_line_stops_training_below_a_costlier_design_that_is_not_met():
     calls2 = drive(search2, Fake())
     line2 = search2.line_points(LOC, "photon_fraction", search2.base)
     assert sum(p["trained"] is not None for p in line2) >= 3
+
+
+def test_worlds_blame_a_parameter_only_for_worlds_that_fail_not_for_undecided_ones():
+    from nlosplan.planner.design.worlds import World
+
+    worlds = [World(i + 1, {"photon_scale": s}, {"albedo": a}) for i, (s, a) in
+              enumerate([(0.5, 0.3), (1.0, 0.4), (2.0, 0.5), (4.0, 0.6)])]
+    per = [{"value": v, "verdict": k} for v, k in
+           [(0.93, UNDECIDED), (0.95, MET), (0.97, MET), (0.92, UNDECIDED)]]
+    att = robust._attribution(SIZE, worlds, per)
+    assert att["breaks"].startswith("undecided in worlds 1, 4") and "breaks it" not in att["breaks"]
+    per[0] = {"value": 0.80, "verdict": NOT_MET}
+    att = robust._attribution(SIZE, worlds, per)
+    assert "breaks it (not met in worlds 1;" in att["breaks"] and att["breaks"].endswith(
+        "; undecided in worlds 4 (the interval straddles the threshold when the seeds or the budget ran out)")

@@ -133,19 +133,23 @@ def _attribution(req, worlds, per) -> dict:
     ok = [i for i, v in enumerate(per) if math.isfinite(v["value"])]
     margins = [req.margin(per[i]["value"]) for i in ok]
     rho = {n: rank_correlation([worlds[i].parameters.get(n, math.nan) for i in ok], margins) for n in names}
-    failing = [i for i, v in enumerate(per) if v["verdict"] != MET]
+    failing = [i for i, v in enumerate(per) if v["verdict"] == NOT_MET]
+    straddling = [i for i, v in enumerate(per) if v["verdict"] == UNDECIDED]
     if not names:
         return {"sensitivity": {}, "breaks": ""}
     driver = max(names, key=lambda n: (abs(rho[n]), n))
-    if not failing:
-        text = (f"met in every world; the margin follows {driver} most (Spearman {rho[driver]:+.2f})"
-                if abs(rho[driver]) > 0 else "met in every world")
+    follows = f"the margin follows {driver} most (Spearman {rho[driver]:+.2f})" if abs(rho[driver]) > 0 else ""
+    undecided = (f"undecided in worlds {', '.join(str(worlds[i].index) for i in straddling)} (the interval "
+                 "straddles the threshold when the seeds or the budget ran out)") if straddling else ""
+    if not failing:  # no world fails it: no parameter is blamed for intervals that are only too wide
+        text = "; ".join(t for t in (undecided or "met in every world", follows) if t)
         return {"sensitivity": rho, "breaks": text, "driver": driver}
     vals = [worlds[i].parameters.get(driver, math.nan) for i in failing]
     worst = max(vals) if rho[driver] > 0 else min(vals)
     side = "<=" if rho[driver] > 0 else ">="
-    text = (f"{driver} {side} {worst:.3g} breaks it (worlds {', '.join(str(worlds[i].index) for i in failing)}; "
-            f"Spearman {rho[driver]:+.2f} with the margin)")
+    text = (f"{driver} {side} {worst:.3g} breaks it (not met in worlds "
+            f"{', '.join(str(worlds[i].index) for i in failing)}; Spearman {rho[driver]:+.2f} with the margin)"
+            + (f"; {undecided}" if undecided else ""))
     return {"sensitivity": rho, "breaks": text, "driver": driver}
 
 
