@@ -16,7 +16,7 @@ from nlosplan.cli import main
     (["design", "--cluster", "localhost:8786"], "give tcp://HOST:PORT"),
     (["design", "--cluster", "local:0"], "local:N (N >= 1)"),
     (["design", "--seed", "-1"], "argument --seed: -1 is out of range"),
-    (["design", "--seed", str(2**31)], "argument --seed: 2147483648 is out of range"),
+    (["design", "--seed", "1000001"], "argument --seed: 1000001 is out of range"),
     (["design", "--seed", "two"], "argument --seed: 'two' is not an integer"),
     (["design", "--worlds", "0"], "argument --worlds: 0 is out of range"),
     (["design", "--models", "mlp,resnet"], "argument --models: unknown model(s) 'resnet'"),
@@ -45,7 +45,7 @@ def test_bad_config_table_and_cluster_exit_2(capsys, tmp_path):
     ("[worlds.ranges]\nalbedo = {low = 0.5, high = 1.5}\n", "albedo: 0.5..1.5 leaves the physical range [0, 1]"),
     ("[worlds.ranges]\nspeed = {low = 1, high = 2}\n", "[worlds.ranges] speed: unknown world parameter"),
     ("[worlds]\nplanets = 3\n", "unknown [worlds] key(s) planets; allowed: candidates, count"),
-    ("[search]\nseed = -3\n", "seed=-3 must be a whole number from 0 to 2147483647"),
+    ("[search]\nseed = -3\n", "seed=-3 must be a whole number from 0 to 1000000"),
     ("[search]\nmodels = ['mlp', 'gpt']\n", "unknown model(s) 'gpt'"),
 ])
 def test_bad_worlds_and_search_tables_exit_2_naming_the_key(capsys, tmp_path, toml, words):
@@ -61,6 +61,20 @@ def test_seed_limit_of_the_cli_is_the_search_s():
     from nlosplan.planner.design.search import MAX_SEED as SEARCH_MAX
 
     assert MAX_SEED == SEARCH_MAX
+
+
+def test_the_largest_seed_gives_evaluation_seeds_the_split_and_training_accept():
+    """Evaluation seeds (seed x 1000 + i) stay within scikit-learn's random_state range at --seed's limit."""
+    import numpy as np
+    from sklearn.model_selection import train_test_split
+
+    from nlosplan.planner.design.search import MAX_SEED, SEED_STRIDE, SearchConfig
+
+    cfg = SearchConfig(seed=MAX_SEED, max_seeds=SEED_STRIDE // 10)
+    top = cfg.seed_of(cfg.max_seeds - 1)
+    assert top < 2**32
+    tr, te = train_test_split(np.arange(10), test_size=0.3, random_state=top)
+    assert len(tr) == 7 and len(te) == 3
 
 
 def test_seed_models_and_worlds_reach_the_configuration():

@@ -9,7 +9,7 @@ import sys
 from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
 
-MAX_SEED = 2**31 - 1  # nlosplan.planner.design.search.MAX_SEED (not imported: --help stays light)
+MAX_SEED = 1_000_000  # nlosplan.planner.design.search.MAX_SEED (not imported: --help stays light)
 
 DEFAULT_OUT = "nlosplan-out/design"
 

@@ -59,8 +59,9 @@ from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, Spread, m
 __all__ = ["SearchConfig", "DesignSearch", "axis_grid", "CONTINUOUS", "MORE_IS_BETTER", "metric_to_score",
            "score_to_metric", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
 
-#: The largest run seed (``--seed``): evaluation seeds are ``seed * SEED_STRIDE + i``.
-MAX_SEED = 2**31 - 1
+#: The largest run seed (``--seed``): evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``),
+#: and they must stay below 2**32, scikit-learn's limit on the split's ``random_state``.
+MAX_SEED = 1_000_000
 SEED_STRIDE = 1000
 #: Candidate learners of the trained evaluator (the best per task is used).
 DEFAULT_MODELS = ("mlp", "cnn1d")
