@@ -223,7 +223,6 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
-#: Fields a sensor file without ``base`` may leave out (labels, and the optional measured pulse).
 #: Fields a complete sensor file may leave out: the labels, and the optional terms whose unset value (None) means
 #: "not modelled" (a measured pulse shape, per-zone terms, dead time), never a generic number.
 OPTIONAL_FILE_FIELDS = ("name", "notes") + tuple(f.name for f in dataclasses.fields(SensorConfig) if f.default is None)
@@ -284,6 +283,24 @@ def sensor_base(spec) -> str | None:
         base = load_table(spec, "sensor file").get("base")
         return base if isinstance(base, str) and base in PRESET_NAMES else None
     return spec if spec in PRESET_NAMES else None
+
+
+def uncertainty(name: str) -> dict | None:
+    """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
+    :mod:`nlosplan.sensor_models.uncertainty`), or None.
+
+    No preset ships one today: their measured values carry line-fit errors
+    only (:data:`MEASURED`), not a calibration's joint uncertainty. The design
+    planner's worlds then draw only from their declared ranges.
+
+    Raises
+    ------
+    UserError
+        For an unknown preset name.
+    """
+    if name not in _builders():
+        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(_builders())}")
+    return None
 
 
 def resolve_sensor(spec) -> SensorConfig:

@@ -31,7 +31,8 @@ Each strategy runs the ask/tell loop in batches (route-ordered by
 nearest neighbour + 2-opt; gantry time from a feed/acceleration model with
 0.5 s settle and 1 s capture per stop) until both targets are reached or
 the budget is spent, once per seed. After every batch: the localization
-RMSE of the planner's ensemble localizer on fixed noisy test captures at
+RMSE (DENALI's loc_rmse, x and y errors pooled) of the planner's ensemble
+localizer on fixed noisy test captures at
 positions off the grid, and the calibration error (largest parameter
 error in units of 0.5 mm, 0.5 mm, 1 %, 1 %).
 
