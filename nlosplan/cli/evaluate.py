@@ -252,8 +252,9 @@ def add(sub) -> None:
     _common(c, jitter=True)
     c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["8in"], metavar="4in,8in",
                    help="object sizes (default: 8in)")
-    c.add_argument("--repeats", type=int_type(1), default=1,
-                   help="independent captures per scene (default: 1; the bound scales as 1/sqrt(repeats))")
+    c.add_argument("--repeats", type=int_type(1, 1_000_000), default=1,
+                   help="independent captures per scene, 1 to 1,000,000 (default: 1; the bound scales as "
+                        "1/sqrt(repeats))")
     c.add_argument("--nuisance", type=_choices(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
                    help="nuisance parameters estimated with the position, among photon_scale, ambient, dark, "
                         "albedo, or 'none' (default: photon_scale)")
