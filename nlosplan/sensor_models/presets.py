@@ -180,9 +180,24 @@ def _plane_unit_3x3() -> SensorConfig:
                + notes + " Ambient and dark rates: MEAS counts per bin at this unit's iterations."))
 
 
+def _denali(zones: str) -> SensorConfig:
+    """DENALI's unit (:mod:`.presets_denali`): facts of its capture settings plus the Table-2 fit."""
+    from nlosplan.sensor_models import presets_denali as d
+
+    rows = int(zones[0])
+    it = d.DENALI_ITERATIONS[zones]
+    name = f"denali-tmf8828-{zones}"
+    base = _tmf8828_short(rows, rows, d.DENALI_FOV_DEG, it, name)
+    return base.replace(pulse_tail_fraction=PLANE_UNIT["pulse_tail_fraction"],
+                        pulse_tail_decay_ps=PLANE_UNIT["pulse_tail_decay_ps"], **d.DENALI_FIT,
+                        notes=d.DENALI_PROVENANCE.format(iterations=f"{it:,}", scores=d.DENALI_SCORES))
+
+
 def _builders() -> dict:
     return {
         "tmf8828-3x3-short": _plane_unit_3x3,
+        "denali-tmf8828-3x3": lambda: _denali("3x3"),
+        "denali-tmf8828-8x8": lambda: _denali("8x8"),
         "tmf8828-4x4-short": lambda: _tmf8828_short(4, 4, (41.0, 52.0), 550_000, "tmf8828-4x4-short"),
         "tmf8828-8x8-short": lambda: _tmf8828_short(8, 8, (41.0, 52.0), 125_000, "tmf8828-8x8-short"),
         "tmf8828-3x3-long": _tmf8828_3x3_long,
