@@ -32,6 +32,8 @@ NUISANCES = {"background_offset": ("light",), "early_residual_counts": ("all",),
 TARGET_KEYS = ("total_rel", "centroid_bins", "spread_rel", "skew", "ratio_rel")
 SCALE_KEYS = ("total_rel", "centroid_bins", "spread_rel", "skew", "level_mean_rel", "level_log_mean")
 SHIPPED = "denali_table2.toml"
+#: The word that names the shipped file on the command line.
+SHIPPED_NAME = "denali-table2"
 
 
 @dataclass(frozen=True)
@@ -277,13 +279,14 @@ def read_tables(path) -> dict:
 
 
 def load_stats(path) -> StatsFile:
-    """Read and validate a statistics file (``.toml`` or ``.json``).
+    """Read and validate a statistics file (``.toml`` or ``.json``; :data:`SHIPPED_NAME` for the shipped one).
 
     Raises
     ------
     UserError
         Unreadable file, or a missing, extra or wrongly typed field (named in the message).
     """
+    path = resolve_stats_path(path)
     return parse_stats(read_tables(path), str(path))
 
 
@@ -295,3 +298,8 @@ def shipped_path() -> Path:
 def shipped_stats() -> StatsFile:
     """The packaged DENALI Table 2 statistics file, parsed."""
     return load_stats(shipped_path())
+
+
+def resolve_stats_path(path):
+    """``path`` itself, or the shipped file's path for the word :data:`SHIPPED_NAME`."""
+    return shipped_path() if str(path) == SHIPPED_NAME else path

@@ -271,7 +271,11 @@ def add(sub) -> None:
     p.add_argument("captures", nargs="?", help="JSON captures of a plane at known distances (tmf882x_distance "
                                                "layout), a DENALI-layout folder, or a capture store (.sqlite)")
     p.add_argument("--score", metavar="DATA",
-                   help="score --sensor on DATA without fitting anything: the per-zone table (plane captures so far)")
+                   help="score --sensor on DATA without fitting anything: the per-zone table (plane captures) or the "
+                        "per-row table (a statistics file, e.g. the shipped DENALI Table 2)")
+    p.add_argument("--scene", metavar="FILE",
+                   help="statistics files: the scene table ([scene], [nuisances] TOML) to score or start from "
+                        "(default: the sensor file's <stem>.scene.toml, or a denali-tmf8828-* preset's own fit)")
     p.add_argument("--model", choices=["zones", "global"],
                    help="JSON plane captures: 'zones' fits every zone with the per-zone terms, amplitude law, pile-up "
                         "and pulse tail; 'global' the single-zone model with one photon scale (zone 4 by default) "

@@ -37,6 +37,13 @@ DENALI_SCENE_FIT: dict = {
     "mount_albedo": 0.8,
     "mount_in_background": False,
 }
+#: The fit's protocol nuisances of the Table-2 statistics file (not properties of the unit; see docs/calibration.md).
+DENALI_NUISANCES_FIT: dict = {
+    "background_offset_on": 0.0234,
+    "background_offset_off": -0.007,
+    "early_residual_counts": 48.0,
+    "early_residual_decay_bins": 3.1,
+}
 #: Provenance shown by ``nlosplan sensor show`` / ``sensor list``.
 DENALI_PROVENANCE = (
     "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6), 128 bins: facts of DENALI's capture code. "
