@@ -82,7 +82,7 @@ SCORERS = {"plane": _score_plane, "statistics": _score_statistics}
 
 
 def score_input(path, sensor: SensorConfig, *, plane_arrivals=None, min_distance_m: float = 0.06,
-                max_distance_m: float = float("inf"), sensor_spec=None, scene_file=None) -> dict:
+                max_distance_m: float = float("inf"), sensor_spec=None, scene_file=None, n_positions: int = 10) -> dict:
     """Score ``sensor`` on the real data at ``path`` without fitting anything.
 
     Parameters
@@ -98,6 +98,8 @@ def score_input(path, sensor: SensorConfig, *, plane_arrivals=None, min_distance
         Statistics: the preset name or sensor file ``sensor`` came from (its ``.scene.toml`` sidecar).
     scene_file : str, optional
         Statistics: the scene table (scene parameters and protocol nuisances) to score with.
+    n_positions : int
+        Statistics: gantry positions per object simulated.
 
     Returns
     -------
@@ -120,4 +122,5 @@ def score_input(path, sensor: SensorConfig, *, plane_arrivals=None, min_distance
         raise UserError(f"--score takes plane captures (a JSON list) or a statistics file so far; {path} is a "
                         f"{kind}, which cannot be scored without fitting yet")
     return SCORERS[kind](path, sensor, plane_arrivals=plane_arrivals, min_distance_m=min_distance_m,
-                         max_distance_m=max_distance_m, sensor_spec=sensor_spec, scene_file=scene_file)
+                         max_distance_m=max_distance_m, sensor_spec=sensor_spec, scene_file=scene_file,
+                         n_positions=n_positions)

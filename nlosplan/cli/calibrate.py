@@ -152,6 +152,12 @@ def _cmd_calibrate(args) -> int:
     from nlosplan.cli import calibrate_plane
 
     t0 = time.perf_counter()
+    if args.stats:
+        from nlosplan.cli.calibrate_stats import run_stats
+
+        return run_stats(args, t0)
+    if args.fit is not None or args.positions is not None:
+        raise UserError("--fit and --positions apply to --stats (and --positions to --score of a statistics file)")
     if args.score:
         return calibrate_plane.run_score(args, t0)
     if not args.captures:
@@ -273,6 +279,15 @@ def add(sub) -> None:
     p.add_argument("--score", metavar="DATA",
                    help="score --sensor on DATA without fitting anything: the per-zone table (plane captures) or the "
                         "per-row table (a statistics file, e.g. the shipped DENALI Table 2)")
+    p.add_argument("--stats", metavar="FILE",
+                   help="fit to a statistics file (e.g. denali-table2, the shipped DENALI Table 2): sensor photon "
+                        "scale and floor, object albedo and the file's protocol nuisances, from noisy simulated "
+                        "captures with DENALI's processing (common random numbers, nlopt); writes --out, its "
+                        "<stem>.scene.toml and <stem>.uncertainty.json (--bootstrap N: refits within the SEMs)")
+    p.add_argument("--fit", metavar="NAME,...",
+                   help="--stats: parameters to fit (default: photon_scale, dark_rate_hz, albedo and the nuisances)")
+    p.add_argument("--positions", type=int_type(1, 100), metavar="N",
+                   help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10)")
     p.add_argument("--scene", metavar="FILE",
                    help="statistics files: the scene table ([scene], [nuisances] TOML) to score or start from "
                         "(default: the sensor file's <stem>.scene.toml, or a denali-tmf8828-* preset's own fit)")

@@ -166,7 +166,8 @@ def run_score(args, t0: float) -> int:
     sensor = resolve_sensor(args.sensor)
     res = score_input(args.score, sensor, plane_arrivals=plane_arrivals,
                       min_distance_m=0.06 if args.min_distance is None else args.min_distance,
-                      sensor_spec=args.sensor, scene_file=getattr(args, "scene", None))
+                      sensor_spec=args.sensor, scene_file=getattr(args, "scene", None),
+                      n_positions=getattr(args, "positions", None) or 10)
     res["seconds"] = time.perf_counter() - t0
     if res["kind"] == "statistics":
         from nlosplan.reports.realism_table import format_table2

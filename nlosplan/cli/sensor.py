@@ -4,6 +4,15 @@ from __future__ import annotations
 
 from nlosplan.cli.common import command_group, emit, sub_parser
 
+def _provenance(name: str) -> str:
+    """One short word for where a preset's values come from (``sensor list``)."""
+    if name.startswith("denali-"):
+        return "DENALI facts + Table-2 fit"
+    if name == "tmf8828-3x3-short":
+        return "plane-unit fit"
+    return "datasheet + MEAS"
+
+
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.sensor_models import PRESET_NAMES, preset
@@ -14,7 +23,7 @@ def _cmd_sensor_list(args) -> int:
         rows.append(dict(name=name, zones=f"{s.zones_rows}x{s.zones_cols}", bins=s.n_bins,
                          bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
                          pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
-                         iterations=s.iterations))
+                         iterations=s.iterations, provenance=_provenance(name)))
     emit(args, {"presets": rows}, format_table(rows))
     return 0
 
@@ -22,7 +31,10 @@ def _cmd_sensor_list(args) -> int:
 def _cmd_sensor_show(args) -> int:
     from nlosplan.sensor_models import resolve_sensor
 
+    from nlosplan.sensor_models import PRESET_NAMES, uncertainty
+
     s = resolve_sensor(args.name)
+    unc = uncertainty(args.name) if args.name in PRESET_NAMES else None
     if args.toml:
         print(s.to_toml())
     elif args.json:
@@ -32,6 +44,11 @@ def _cmd_sensor_show(args) -> int:
             if k == "pulse_shape" and v is not None:
                 v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
             print(f"{k:>22} = {v}")
+        if unc is not None:
+            print(f"uncertainty ({unc.get('method', '')}):")
+            for k, p in unc["parameters"].items():
+                err = "" if p["std"] is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
+                print(f"{k:>22} = {p['value']:.5g}{err}")
     return 0
 
 

@@ -24,7 +24,7 @@ from nlosplan.sensor_models.pipeline import (
     sample_counts,
     sample_histogram,
 )
-from nlosplan.sensor_models.presets import PRESET_NAMES, preset, resolve_sensor
+from nlosplan.sensor_models.presets import PRESET_NAMES, preset, resolve_sensor, uncertainty
 from nlosplan.sensor_models.transient import (TimeGrid, bin_nodes_without_irf, deposit, deposit_at, irf_extent_ps,
                                               irf_matrix)
 from nlosplan.sensor_models.zones import flash_intensity, solid_angle_rect, zone_edges_tan, zone_rays, zone_solid_angles
@@ -35,5 +35,5 @@ __all__ = [
     "degrade_counts", "degrade_expected", "degrade_linear", "deposit", "deposit_at", "expected_counts",
     "expected_histogram", "flash_intensity", "impulse_fwhm_ps", "impulse_sigma_ps", "irf_extent_ps", "irf_matrix",
     "pileup_expected", "preset", "pulse_boxes", "reach", "resolve_sensor", "sample_counts", "sample_histogram",
-    "sample_poisson", "saturate", "solid_angle_rect", "zone_edges_tan", "zone_rays", "zone_solid_angles",
+    "sample_poisson", "saturate", "solid_angle_rect", "uncertainty", "zone_edges_tan", "zone_rays", "zone_solid_angles",
 ]

@@ -232,6 +232,26 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
+def uncertainty(name: str) -> dict | None:
+    """The parameter-uncertainty JSON shipped with a calibrated preset, or None for a preset without one.
+
+    Layout (issue 16's contract): ``{"sensor": name, "parameters": {field or denali_scene keyword: {"value", "std",
+    "lo", "hi"}}, "samples": [{name: value}, ...], ...}``.
+
+    Raises
+    ------
+    UserError
+        For an unknown preset name.
+    """
+    import json
+    from importlib import resources
+
+    if name not in PRESET_NAMES:
+        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(PRESET_NAMES)}")
+    f = resources.files("nlosplan.sensor_models") / "data" / f"{name}.uncertainty.json"
+    return json.loads(f.read_text()) if f.is_file() else None
+
+
 def resolve_sensor(spec) -> SensorConfig:
     """A preset name or a path to a ``.toml``/``.json`` sensor file (a :class:`SensorConfig` is returned as it is)."""
     if isinstance(spec, SensorConfig):

@@ -1,0 +1,110 @@
+"""``nlosplan calibrate --stats FILE``: fit sensor, scene and protocol nuisances to a statistics file."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from nlosplan.cli.common import emit, note, progress_bar
+from nlosplan.errors import UserError
+
+#: Options of ``calibrate`` that fit plane or DENALI captures, not statistics.
+NOT_FOR_STATS = ("captures", "score", "model", "terms", "folds", "where", "fidelity", "zones", "start", "lights",
+                 "min_distance", "pulse")
+
+
+def _free(text: str | None) -> tuple:
+    from nlosplan.calibration.stats_fit import DEFAULT_FREE, FITTABLE
+
+    if not text:
+        return DEFAULT_FREE
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    bad = [n for n in names if n not in FITTABLE]
+    if bad or not names:
+        raise UserError(f"unknown parameter(s) {', '.join(bad) or '(none)'} in --fit; allowed: {', '.join(FITTABLE)}")
+    return names
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def run_stats(args, t0: float) -> int:
+    """Fit, bootstrap, write the sensor file, its scene table and its uncertainty JSON, print the per-row table."""
+    from nlosplan.calibration.stats_file import load_stats
+    from nlosplan.calibration.stats_fit import bootstrap, fit_stats, split, uncertainty_dict
+    from nlosplan.calibration.stats_model import components
+    from nlosplan.calibration.stats_score import scene_for, scene_table_path, scene_table_toml, score_stats
+    from nlosplan.reports.realism_table import format_table2
+    from nlosplan.sensor_models import resolve_sensor
+
+    for name in NOT_FOR_STATS:
+        value = getattr(args, name, None)
+        if value not in (None, False):
+            raise UserError(f"--{name.replace('_', '-')} does not apply to --stats" if name != "captures" else
+                            "give either CAPTURES or --stats FILE, not both")
+    if args.steps != "scale,pulse,noise":
+        raise UserError("--steps does not apply to --stats (choose the fitted parameters with --fit)")
+    if args.bootstrap == 1:
+        raise UserError("--bootstrap 1: give 0 (none) or at least 2 refits for a spread")
+    free = _free(args.fit)
+    if args.out and Path(args.out).suffix not in (".toml", ".json"):
+        raise UserError(f"--out {args.out} must end in .toml or .json")
+    args.positions = args.positions or 10
+    stats = load_stats(args.stats)
+    spec = args.sensor or "denali-tmf8828-3x3"
+    sensor = resolve_sensor(spec)
+    scene, nuis, source = scene_for(spec, sensor, args.scene)
+    zones = f"{sensor.zones_rows}x{sensor.zones_cols}"
+    if zones not in stats.processing or not stats.rows_for(zones):
+        raise UserError(f"{args.stats} has no rows for a {zones} sensor ({sensor.name})")
+    note(args, f"simulating {30 * args.positions} scenes per size for {sensor.name} ...")
+    comp = components(sensor, stats.processing[zones].zone, n_positions=args.positions)
+    start = {k: v for k, v in scene.items() if k != "mount"} | nuis
+    note(args, f"fitting {', '.join(free)} (start: {source}) ...")
+    fit = fit_stats(stats, comp, sensor, start, free, seed=args.seed)
+    samples = []
+    if args.bootstrap:
+        with progress_bar(args, args.bootstrap, "bootstrap", "refit") as bar:
+            samples = bootstrap(stats, comp, sensor, fit, args.bootstrap, seed=args.seed,
+                                progress=None if bar is None else (lambda done, total: bar.update(1)))
+    fitted, fscene, fnuis = split(fit.values, sensor)
+    fscene["mount"] = bool(scene.get("mount", True))
+    res = score_stats(stats, fitted, fscene, fnuis, comp=comp)
+    unc = uncertainty_dict(sensor.name, fit, samples,
+                           f"bootstrap over the SEMs and the Monte-Carlo noise ({len(samples)} refits)")
+    files = {}
+    if args.out:
+        out = Path(args.out)
+        fitted = fitted.replace(notes=(sensor.notes + f" Refitted by 'nlosplan calibrate --stats {args.stats}' "
+                                       f"(objective {fit.objective:.4g}; {res['meets']['statistics']} of "
+                                       f"{res['meets']['statistics_of']} row statistics, {res['meets']['ratios']} of "
+                                       f"{res['meets']['ratios_of']} ratios within target).").strip())
+        _atomic_write(out, fitted.to_toml() if out.suffix == ".toml" else fitted.to_json())
+        files["sensor"] = str(out)
+        st = scene_table_path(out)
+        _atomic_write(st, scene_table_toml(fscene, fnuis, {"statistics": str(args.stats), "objective": fit.objective,
+                                                            "converged": fit.converged}))
+        files["scene"] = str(st)
+        uj = out.with_name(out.stem + ".uncertainty.json")
+        _atomic_write(uj, json.dumps(unc, indent=1))
+        files["uncertainty"] = str(uj)
+    data = {"sensor": sensor.name, "statistics": str(args.stats), "fit": {
+        "values": fit.values, "free": list(fit.free), "objective": fit.objective, "converged": fit.converged,
+        "evaluations": fit.evaluations, "seconds": fit.seconds, "message": fit.message},
+        "uncertainty": unc, "score": res, "files": files, "seconds": time.perf_counter() - t0}
+    lines = [f"fitted {', '.join(fit.free)} of {sensor.name} to {args.stats} ({30 * args.positions} scenes per size, "
+             f"noise seed {args.seed}): objective {fit.objective:.4g} after {fit.evaluations} evaluations"
+             + ("" if fit.converged else f"; NOT converged: {fit.message}")]
+    for k in fit.free:
+        p = unc["parameters"][k]
+        err = "" if p["std"] is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
+        lines.append(f"  {k:26s} {fit.values[k]:.5g}{err}")
+    lines.append(format_table2(res))
+    lines += [f"wrote {k}: {v}" for k, v in files.items()]
+    emit(args, data, "\n".join(lines))
+    return 0
