@@ -29,7 +29,7 @@ def test_bad_config_table_and_cluster_exit_2(capsys, tmp_path):
     assert "unknown design axis speed" in capsys.readouterr().err
     bad.write_text("[space\n")
     assert main(["design", "--quick", "--config", str(bad), "--out", str(tmp_path / "o")]) == 2
-    assert "cannot read" in capsys.readouterr().err
+    assert "is not valid TOML" in capsys.readouterr().err
 
 
 def test_help_teaches_with_examples(capsys):

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 
 from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
@@ -30,7 +28,9 @@ candidates are verified over several seeds. With --real, the trained evaluator u
 captures from a store instead (designs finer than the captures are reported unreachable).
 
 Output (OUT): report.html (self-contained), report.md, PNG plots, result.json,
-design_checkpoint.json (every evaluation; --resume continues from it).
+design_checkpoint.json and design_evaluations.jsonl (every evaluation; --resume
+continues from them; a rerun into a folder with a previous run needs --resume or
+--overwrite). Progress goes to stderr, also with --json.
 JSON: {"requirements": [{"task", "parameter", "minimum" or "maximum", "interval",
 "feasible"}...], "cheapest": [...], "report": PATH}."""
 
@@ -68,6 +68,9 @@ def build_config(args):
         cfg = replace(cfg, scenes=replace(cfg.scenes, backend=args.backend))
     if args.seeds is not None:
         cfg = replace(cfg, search=replace(cfg.search, seeds=args.seeds))
+    for flag, value in (("--where", args.where), ("--capture-sensor", args.capture_sensor)):
+        if value is not None and not args.real:
+            raise UserError(f"{flag} applies only with --real STORE (the real captures it describes)")
     if args.real:
         where = None
         if args.where:
@@ -81,36 +84,37 @@ def build_config(args):
 def _cmd_design(args) -> int:
     from pathlib import Path
 
+    from nlosplan.cli.live import live_page
+    from nlosplan.files import check_output_dir, write_json, writing
     from nlosplan.planner.design.run import run_design
     from nlosplan.reports.design_report import minimum_hardware_text, write_design_report
 
-    from nlosplan.cli.live import live_page
-
+    if args.repair and not args.resume:
+        raise UserError("--repair applies only with --resume")
+    if args.overwrite and args.resume:
+        raise UserError("--overwrite and --resume exclude each other: continue the run or start over")
     cfg = build_config(args)
-    if args.real and not Path(args.real).exists():
-        raise UserError(f"capture store {args.real} does not exist")
-    with live_page(args, "design", args.out), progress_bar(args, None, "design", "eval") as bar:
-        stage = {"last": None}
-
+    check_output_dir(args.out)
+    with live_page(args, "design", args.out), progress_bar(args, None, "design", "evaluation") as bar:
         def progress(text, done, total):
-            if bar is None:  # no terminal: one line per stage on stderr (none with --json)
-                head = text.split(":")[0]
-                if not args.json and head != stage["last"]:
-                    stage["last"] = head
-                    print(f"nlosplan design: {head}", file=sys.stderr, flush=True)
+            stage, _, detail = text.partition(": ")
+            if stage in ("checkpoint",):
+                bar.note(detail)
                 return
-            if total is not None:
-                bar.total = total
-                bar.n = done
-            bar.set_postfix_str(text[:70])
-            bar.refresh()
+            bar.stage(stage)
+            if done is not None:
+                bar.set(done, total, detail)
+            else:
+                bar.set_postfix_str(detail)
 
         result = run_design(cfg, args.out, resume=args.resume, workers=args.workers, cluster=args.cluster,
-                            progress=progress)
-    paths = write_design_report(result, args.out)
-    result["report"] = paths["html"]
-    result["report_markdown"] = paths["markdown"]
-    Path(args.out, "result.json").write_text(json.dumps(result, default=str, indent=1))
+                            progress=progress, overwrite=args.overwrite, repair=args.repair)
+    with writing(kept=f"every evaluation is kept in {args.out} (design_evaluations.jsonl)",
+                 cont="free some space and rerun with --resume: nothing is evaluated again"):
+        paths = write_design_report(result, args.out)
+        result["report"] = paths["html"]
+        result["report_markdown"] = paths["markdown"]
+        write_json(Path(args.out, "result.json"), result, default=str, indent=1)
     short = {"requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "minimum", "maximum",
                                                  "interval", "feasible", "note") if k in r}
                               for r in result["requirements"]],
@@ -141,7 +145,14 @@ def add(sub) -> None:
     p.add_argument("--seeds", type=int_type(1, 20), default=None, help="seeds of the verification (default 3; quick 2)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--resume", action="store_true",
-                   help="continue from OUT/design_checkpoint.json; nothing evaluated is computed again")
+                   help="continue from OUT/design_checkpoint.json; nothing evaluated is computed again (an error "
+                        "when OUT holds no run)")
+    p.add_argument("--repair", action="store_true",
+                   help="with --resume: drop damaged lines of OUT/design_evaluations.jsonl (they are named; their "
+                        "evaluations run again; the damaged file is kept as .damaged)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="start over where OUT holds a previous run (its files move to .bak); without it that is "
+                        "an error")
     runner = p.add_argument_group("where evaluations run")
     runner.add_argument("--workers", type=int_type(1, 256), default=None,
                         help="local worker processes (default: the CPU count)")

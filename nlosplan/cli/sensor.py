@@ -4,12 +4,17 @@ from __future__ import annotations
 
 from nlosplan.cli.common import command_group, emit, sub_parser
 
+
 def _provenance(name: str) -> str:
-    """One short word for where a preset's values come from (``sensor list``)."""
+    """A few words on where a preset's values come from (``sensor list``)."""
     if name.startswith("denali-"):
         return "DENALI facts + Table-2 fit"
-    if name == "tmf8828-3x3-short":
+    if name == "tmf8828-3x3-plane-unit":
         return "plane-unit fit"
+    if name.startswith("vl53"):
+        return "ST docs + assumed"
+    if name.endswith("-long"):
+        return "driver constant + MEAS"
     return "datasheet + MEAS"
 
 
@@ -29,26 +34,23 @@ def _cmd_sensor_list(args) -> int:
 
 
 def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import resolve_sensor
-
-    from nlosplan.sensor_models import PRESET_NAMES, uncertainty
+    from nlosplan.sensor_models import PRESET_NAMES, resolve_sensor, sensor_base, uncertainty
 
     s = resolve_sensor(args.name)
     unc = uncertainty(args.name) if args.name in PRESET_NAMES else None
-    if args.toml:
-        print(s.to_toml())
+    if args.toml:  # with its base preset, so that a saved copy takes later model fields from it
+        print(s.to_toml(base=sensor_base(args.name)))
     elif args.json:
-        print(s.to_json())
+        print(s.to_json(base=sensor_base(args.name)))
     else:
         for k, v in s.to_dict().items():
             if k == "pulse_shape" and v is not None:
                 v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
             print(f"{k:>22} = {v}")
         if unc is not None:
-            print(f"uncertainty ({unc.get('method', '')}):")
+            print(f"uncertainty ({len(unc['samples'])} bootstrap refits; 95 % intervals):")
             for k, p in unc["parameters"].items():
-                err = "" if p["std"] is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
-                print(f"{k:>22} = {p['value']:.5g}{err}")
+                print(f"{k:>22} = {p['value']:.5g} +- {p['std']:.3g} ({p['lo']:.4g} to {p['hi']:.4g})")
     return 0
 
 

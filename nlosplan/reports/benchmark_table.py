@@ -10,10 +10,11 @@ in metres, accuracies in percent. Formats: a pandas table
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
+
+from nlosplan.files import write_json, write_text
 
 from nlosplan.reports.tables import markdown_table
 
@@ -173,7 +174,6 @@ def write_benchmark(result: dict, out_dir) -> dict[str, str]:
         ``{"csv": path, "markdown": path, "json": path}``.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     table = benchmark_table(result)
     flat = pd.DataFrame(table.to_numpy(), index=table.index, columns=["/".join(c) for c in table.columns])
     runs = runs_table(result)
@@ -181,7 +181,7 @@ def write_benchmark(result: dict, out_dir) -> dict[str, str]:
         r = runs[runs["task"] == task].set_index("model")
         flat[f"{task}/train_seconds"] = [r["train_seconds"].get(m) for m in flat.index]
     paths = {"csv": out / "benchmark.csv", "markdown": out / "benchmark.md", "json": out / "benchmark.json"}
-    flat.to_csv(paths["csv"], index_label="model")
-    paths["markdown"].write_text(benchmark_markdown(result), encoding="utf-8")
-    paths["json"].write_text(json.dumps(result, indent=2, default=float), encoding="utf-8")
+    write_text(paths["csv"], flat.to_csv(index_label="model"))
+    write_text(paths["markdown"], benchmark_markdown(result))
+    write_json(paths["json"], result, indent=2, default=float)
     return {k: str(v) for k, v in paths.items()}

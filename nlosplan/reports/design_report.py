@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from nlosplan.files import write_text
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
 from nlosplan.reports.tables import format_table, markdown_table
 
@@ -206,9 +207,9 @@ def write_design_report(result: dict, out) -> dict:
            f"- references: {json.dumps(result['references'])}", "", "```json",
            json.dumps(prov["config"], indent=1), "```", ""]
     md_path = out / "report.md"
-    md_path.write_text("\n".join(md))
+    write_text(md_path, "\n".join(md))
     html_path = out / "report.html"
-    html_path.write_text(_html(result, sections, plots, stab_text, failures, unreachable, prov))
+    write_text(html_path, _html(result, sections, plots, stab_text, failures, unreachable, prov))
     return {"markdown": str(md_path), "html": str(html_path), "plots": {k: str(v) for k, v in plots.items()}}
 
 

@@ -14,10 +14,11 @@ Markdown, JSON and PNG files. Computes no results.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
+
+from nlosplan.files import write_json, write_text
 
 from nlosplan.reports.benchmark_table import not_applicable
 from nlosplan.reports.figures import pyplot, save_figure
@@ -237,7 +238,6 @@ def write_jitter(result: dict, out_dir, *, plot=None) -> dict[str, str]:
         and seconds; the JSON is the whole result.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out / "jitter.csv", "markdown": out / "jitter.md", "json": out / "jitter.json",
              "plot": Path(plot) if plot is not None else out / "jitter.png"}
     table = jitter_table(result)
@@ -245,12 +245,12 @@ def write_jitter(result: dict, out_dir, *, plot=None) -> dict[str, str]:
     lv = levels_table(result).set_index("jitter_ps")
     for col in ("n_rows", "peak_counts", "peak_width_ps", "train_seconds", "seconds"):
         flat[col] = [lv[col].get(v) for v in flat.index]
-    flat.to_csv(paths["csv"], index_label="jitter_ps")
+    write_text(paths["csv"], flat.to_csv(index_label="jitter_ps"))
     plot_jitter(result, paths["plot"])
     try:
         figure = str(Path(paths["plot"]).resolve().relative_to(out.resolve()))
     except ValueError:
         figure = str(Path(paths["plot"]).resolve())
-    paths["markdown"].write_text(jitter_markdown(result, figure=figure), encoding="utf-8")
-    paths["json"].write_text(json.dumps(result, indent=2, default=float), encoding="utf-8")
+    write_text(paths["markdown"], jitter_markdown(result, figure=figure))
+    write_json(paths["json"], result, indent=2, default=float)
     return {k: str(v) for k, v in paths.items()}

@@ -96,7 +96,7 @@ def _check_axes(axes) -> np.ndarray:
 
 
 def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nuisance=("photon_scale",), axes=None,
-                        zones=None, theta=None, chunk: int = 25):
+                        zones=None, theta=None, chunk: int = 25, progress=None):
     """Expected counts and their derivatives with respect to position and nuisance parameters.
 
     Parameters
@@ -116,6 +116,8 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nui
         Evaluate at this displacement (metres) and these log-changes (default 0: the scene as given).
     chunk : int
         Scenes per compiled call.
+    progress : callable, optional
+        ``progress(done, total)`` in scenes after each compiled call.
 
     Returns
     -------
@@ -145,6 +147,8 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nui
         keep = min(sim.chunk, n - start)
         lams.append(np.asarray(lam)[:keep])
         jacs.append(np.asarray(jac)[:keep])
+        if progress is not None:
+            progress(start + keep, n)
     return np.concatenate(lams), np.concatenate(jacs), ("x", "y") + tuple(f"log_{m}" for m in names), sim
 
 
@@ -283,7 +287,7 @@ def _rmse(cov) -> tuple[float, np.ndarray]:
 
 def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default", repeats: int = 1,
                             nuisance=("photon_scale",), axes=None, zones=None, cond_max: float = COND_MAX,
-                            chunk: int = 25) -> CRLBBatchResult:
+                            chunk: int = 25, progress=None) -> CRLBBatchResult:
     """Cramér–Rao bounds on localization for many scenes with one compiled simulator.
 
     Parameters
@@ -308,6 +312,8 @@ def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default",
         Condition-number threshold of the equilibrated Fisher matrix.
     chunk : int
         Scenes per compiled call.
+    progress : callable, optional
+        ``progress(done, total)`` in scenes as the Jacobians are computed.
 
     Returns
     -------
@@ -327,7 +333,7 @@ def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default",
     if not scenes:
         raise UserError("give at least one scene")
     lam, jac, names, sim = counts_and_jacobian(scenes, sensor, fidelity=fidelity, nuisance=nuisance, axes=axes,
-                                               zones=zones, chunk=chunk)
+                                               zones=zones, chunk=chunk, progress=progress)
     fisher = poisson_fisher(lam.reshape(len(scenes), -1), jac.reshape(len(scenes), -1, len(names)), repeats)
     per_scene = (time.perf_counter() - t0) / len(scenes)
     fid = sim.plan.fidelity

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, number_type
 from nlosplan.errors import UserError
+from nlosplan.files import write_json
 
 EXAMPLES = (
     "nlosplan rig run --emulate --planner active --budget 40 --target-rmse 0.05 --store out/loop.db",
@@ -166,7 +167,7 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
               "excluded": cand.excluded,
               "finished": planner.finished or (f"budget of {args.budget} positions spent"
                                                if best["captures"] >= args.budget else "plan ended")}
-    (out / "rig_run.json").write_text(json.dumps(result, indent=1, default=float), encoding="utf-8")
+    write_json(out / "rig_run.json", result, indent=1, default=float)
     last = loop.history[-1] if loop.history else None
     cv = "n/a" if not last or last["cv_rmse_m"] == float("inf") else f"{1e3 * last['cv_rmse_m']:.1f} mm"
     text = (f"run {run_id}: {best['captures']} positions captured ({summary.captured} captures stored, "

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from nlosplan.errors import UserError
+from nlosplan.files import atomic_path
 from nlosplan.sensor_models import SensorConfig
 from nlosplan.sensor_models.degrade import Degradation, degrade_counts, degrade_expected, degrade_linear, reach
 
@@ -151,14 +152,12 @@ class ReferenceData:
     # --------------------------------------------------------------- files
     def save(self, path: str | Path) -> Path:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {k: getattr(self, k) for k in ("means", "counts", "crlb_lam", "crlb_jac") if getattr(self, k) is not None}
         meta = {"sensor": self.sensor.to_dict(), "source": self.source, "seconds": self.seconds,
                 "labels": self.labels.to_dict(orient="list"),
                 "crlb_labels": None if self.crlb_labels is None else self.crlb_labels.to_dict(orient="list")}
-        tmp = path.with_name(path.name + ".part.npz")
-        np.savez(tmp, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
-        tmp.replace(path)
+        with atomic_path(path) as tmp:
+            np.savez(tmp, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
         return path
 
 

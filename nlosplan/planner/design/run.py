@@ -23,8 +23,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from nlosplan.data.load import load_dataset
+from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
+from nlosplan.files import write_bytes, write_text, writing
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, reference_from_dataset, simulate_reference
 from nlosplan.planner.design.evaluators import evaluate
@@ -111,49 +112,118 @@ def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
 
 
 def read_evaluations(path) -> list[dict]:
-    """The results in a ``design_evaluations.jsonl`` log, in order; a torn line (a killed run) is skipped."""
+    """The results in a ``design_evaluations.jsonl`` log, in order (a torn last line, a killed run's, is left out).
+
+    Raises
+    ------
+    UserError
+        A line before the last does not hold an evaluation (see :func:`check_log`).
+    """
+    return check_log(path).results
+
+
+def _evaluation(line: str) -> dict | None:
+    """The evaluation record of a log line, or None when the line is not one."""
+    try:
+        r = json.loads(line)
+    except json.JSONDecodeError:
+        return None
+    return r if isinstance(r, dict) and {"evaluator", "task", "design"} <= set(r) else None
+
+
+@dataclass
+class LogCheck:
+    """What a ``design_evaluations.jsonl`` holds: its results, damaged lines (1-based) and a torn tail."""
+
+    results: list[dict]
+    damaged: list[int]
+    torn_tail: bool
+    lines: list[str]
+
+
+def check_log(path, *, repair: bool = False) -> LogCheck:
+    """Read an evaluation log; damaged lines stop it unless ``repair``.
+
+    The last line without its newline is the evaluation a killed run was
+    writing: it is left out (and cut from the file when the run resumes).
+    Any other line that is not a JSON evaluation is damage: a UserError
+    names the lines, unless ``repair`` (then they are left out and reported
+    in ``damaged``).
+    """
     path = Path(path)
-    out = []
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:  # the line being written when the run was killed
-                continue
-    return out
+    if not path.exists():
+        return LogCheck([], [], False, [])
+    data = path.read_bytes()
+    torn = bool(data) and not data.endswith(b"\n")
+    lines = data.decode("utf-8", errors="replace").split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    results, damaged = [], []
+    for i, line in enumerate(lines, 1):
+        r = _evaluation(line)
+        if r is None:
+            if not (torn and i == len(lines)):  # the line a killed run was writing is not damage
+                damaged.append(i)
+            continue
+        results.append(r)
+    body = lines[:-1] if torn and _evaluation(lines[-1]) is None else lines
+    if damaged and not repair:
+        shown = ", ".join(map(str, damaged[:10])) + (f" and {len(damaged) - 10} more" if len(damaged) > 10 else "")
+        raise UserError(f"{path}: line(s) {shown} of {len(body)} are damaged (not an evaluation); rerun with --resume "
+                        "--repair to drop them (their evaluations run again), or restore the file")
+    return LogCheck(results, damaged, torn, body)
 
 
 class _Checkpoint:
     """``design_checkpoint.json`` (configuration, candidates) + ``design_evaluations.jsonl`` (one result per line).
 
     Results are appended and flushed one line at a time, so a killed run
-    loses at most the evaluation in flight; a torn last line is ignored.
+    loses at most the evaluation in flight. Starting over where a run's
+    files exist needs ``overwrite`` (they move to ``.bak``); resuming needs
+    a checkpoint; a damaged log needs ``repair`` (see :func:`check_log`).
     """
 
-    def __init__(self, path: Path, cfg: DesignConfig, resume: bool):
+    def __init__(self, path: Path, cfg: DesignConfig, resume: bool, *, overwrite: bool = False, repair: bool = False,
+                 say=None):
         self.path = path
         self.log = path.with_name(EVALUATIONS)
         self.data = {"config_hash": cfg.hash(), "config": cfg.to_dict(), "candidates": None, "optimize_log": []}
         self.results: list[dict] = []
-        if path.exists() and resume:
+        say = say or (lambda text: None)
+        if resume:
+            if not path.exists():
+                raise UserError(f"--resume: there is no run to resume in {path.parent} (no {path.name}); "
+                                "run without --resume to start one")
             try:
                 old = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError) as exc:
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
                 raise UserError(f"cannot read the checkpoint {path}: {exc}") from None
-            if old.get("config_hash") != cfg.hash():
+            if not isinstance(old, dict) or old.get("config_hash") != cfg.hash():
                 raise UserError(f"{path} is from a run with another configuration; use another --out, "
-                                "or run without --resume to start over (the old checkpoint is kept as .bak)")
+                                "or run with --overwrite to start over (the old files move to .bak)")
             self.data = old
-            self.results = read_evaluations(self.log)
+            check = check_log(self.log, repair=repair)
+            self.results = check.results
+            if check.damaged or check.torn_tail:  # rewrite the log without them, keeping the damaged one aside
+                if check.damaged:
+                    kept = write_bytes(self.log.with_name(self.log.name + ".damaged"), self.log.read_bytes())
+                    say(f"--repair: dropped damaged line(s) {', '.join(map(str, check.damaged))} of {self.log.name} "
+                        f"(their evaluations run again; the damaged file is kept as {kept.name})")
+                write_text(self.log, "".join(json.dumps(r, default=_json_default) + "\n" for r in self.results))
         else:
-            for old in (path, self.log):
-                if old.exists():
-                    old.replace(old.with_name(old.name + ".bak"))
+            if repair:
+                raise UserError("--repair applies only with --resume")
+            old = [p for p in (path, self.log) if p.exists()]
+            if old and not overwrite:
+                n = len(check_log(self.log, repair=True).results) if self.log.exists() else 0
+                raise UserError(f"{path.parent} holds a previous run ({n} evaluations); pass --resume to continue it, "
+                                "--overwrite to start over (its files move to .bak), or choose another --out")
+            for p in old:
+                p.replace(p.with_name(p.name + ".bak"))
+            if old:
+                say(f"--overwrite: the previous run's {', '.join(p.name for p in old)} moved to .bak")
             self.save()
-        torn = self.log.exists() and self.log.stat().st_size > 0 and not self.log.read_bytes().endswith(b"\n")
         self._fh = open(self.log, "a")
-        if torn:
-            self._fh.write("\n")  # end the torn line so the next result starts its own
 
     def add(self, result: dict) -> None:
         self.results.append(result)
@@ -161,9 +231,7 @@ class _Checkpoint:
         self._fh.flush()
 
     def save(self) -> None:
-        tmp = self.path.with_name(self.path.name + ".part")
-        tmp.write_text(json.dumps(self.data, default=_json_default))
-        tmp.replace(self.path)
+        write_text(self.path, json.dumps(self.data, default=_json_default))
 
     def close(self) -> None:
         self._fh.close()
@@ -219,8 +287,18 @@ def _stability(quick: bool) -> dict:
             "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
 
 
+def check_inputs(cfg: DesignConfig) -> None:
+    """What a run needs from outside, checked before any work: the real captures' store and sensor (one line each)."""
+    if cfg.real:
+        captured = resolve_sensor(cfg.capture_sensor or cfg.space.reference)
+        zones = f"{captured.zones_rows}x{captured.zones_cols}"
+        check_captures(cfg.real, {**(cfg.real_where or {}), "zones": zones}, drop_backgrounds=True,
+                       zones_hint="the real captures must have the capture sensor's zones (give the matching "
+                                  "--capture-sensor)")
+
+
 def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
-               cluster: str | None = None, progress=None) -> dict:
+               cluster: str | None = None, progress=None, overwrite: bool = False, repair: bool = False) -> dict:
     """Run the design search and summarize it.
 
     Parameters
@@ -229,63 +307,90 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     out : str or Path
         Output folder (checkpoint, references, report).
     resume : bool
-        Continue from ``OUT/design_checkpoint.json`` (same configuration).
+        Continue from ``OUT/design_checkpoint.json`` (same configuration); an error when there is none.
     workers : int, optional
         Local worker processes (default: the CPU count; 1 runs in this process).
     cluster : str, optional
         ``tcp://HOST:PORT`` or ``local:N`` (Dask) instead of the local pool.
     progress : callable, optional
-        ``progress(text, done, total)`` after each step.
+        ``progress(text, done, total)`` after each step; ``text`` starts with the stage (``references``,
+        ``grid``, ``refine``, ``optimize``, ``verify``, ...) and a colon; ``done``/``total`` count the
+        evaluations done and planned so far (None where not counted).
+    overwrite : bool
+        Start over where a previous run's files are (they move to ``.bak``); without it that is an error.
+    repair : bool
+        With ``resume``: drop damaged lines of the evaluation log (else they stop the run with their numbers).
 
     Returns
     -------
     dict
         :func:`~nlosplan.planner.design.summary.summarize`'s result plus
         ``provenance``, ``references``, ``stability`` and ``checkpoint``.
+
+    Raises
+    ------
+    UserError
+        Before any work: nothing to resume, a previous run without ``overwrite``, a damaged log without
+        ``repair``, unusable real captures or capture sensor, an unreachable cluster.
     """
     t0 = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
-    ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume)
-    sims, real, ref_info = _references(cfg, out, say)
+    check_inputs(cfg)
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume, overwrite=overwrite, repair=repair,
+                       say=lambda text: say(f"checkpoint: {text}"))
+    try:
+        executor = make_executor(workers, cluster)
+    except BaseException:
+        ckpt.close()
+        raise
+    try:
+        with writing(kept=f"every evaluation finished so far is kept in {ckpt.log}",
+                     cont="free some space and rerun with --resume"):
+            result, stability = _search(cfg, out, ckpt, executor, say)
+        executor_name = executor.name
+    finally:
+        executor.close()
+        ckpt.close()
+    result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=result.pop("_refs"),
+                  stability=stability, checkpoint=str(out / CHECKPOINT))
+    return result
+
+
+def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say) -> tuple[dict, dict | None]:
+    """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
+    sims, real, ref_info = _references(cfg, out, lambda text, *a: say(f"references: {text}", *a))
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
     search.ingest(ckpt.results)
     if ckpt.data.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
                  for k, v in ckpt.data["candidates"].items()}
         search.stage = "optimize"
-    executor = make_executor(workers, cluster)
-    try:
-        done = len(ckpt.results)
-        stability = None
-        while True:
-            jobs = search.suggest()
-            if not jobs and search.stage == "optimize":
-                if ckpt.data.get("candidates") is None:
-                    say("optimizing per discrete choice (nlopt COBYLA on the corrected bound)")
-                    log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
-                    cands = collect_candidates(search, log, cfg.search.candidates)
-                    ckpt.data["candidates"] = cands
-                    ckpt.data["optimize_log"] = log
-                    ckpt.save()
-                search.set_candidates(cands, ckpt.data["optimize_log"])
-                continue
-            if not jobs:
-                break
-            total = done + len(jobs)
-            for _, result in executor.map(evaluate, jobs):
-                search.ingest([result])
-                ckpt.add(result)
-                done += 1
-                say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
-                    done, total)
-        stability = _stability(cfg.label.startswith("quick"))
-        executor_name = executor.name
-    finally:
-        executor.close()
-        ckpt.close()
+    done = len(ckpt.results)
+    while True:
+        jobs = search.suggest()
+        if not jobs and search.stage == "optimize":
+            if ckpt.data.get("candidates") is None:
+                say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
+                log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
+                cands = collect_candidates(search, log, cfg.search.candidates)
+                ckpt.data["candidates"] = cands
+                ckpt.data["optimize_log"] = log
+                ckpt.save()
+            search.set_candidates(cands, ckpt.data["optimize_log"])
+            continue
+        if not jobs:
+            break
+        total = done + len(jobs)
+        say(f"{search.stage}: {len(jobs)} evaluations", done, total)
+        for _, result in executor.map(evaluate, jobs):
+            search.ingest([result])
+            ckpt.add(result)
+            done += 1
+            say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
+                done, total)
+    stability = _stability(cfg.label.startswith("quick"))
     result = summarize(search)
-    result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=ref_info,
-                  stability=stability, checkpoint=str(out / CHECKPOINT))
-    return result
+    result["_refs"] = ref_info
+    return result, stability
