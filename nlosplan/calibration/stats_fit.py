@@ -185,15 +185,58 @@ def bootstrap(stats: StatsFile, comp, sensor, fit: StatsFit, n: int, *, seed: in
     return out
 
 
-def uncertainty_dict(sensor_name: str, fit: StatsFit, samples: list[dict], method: str) -> dict:
-    """The parameter-uncertainty JSON (CONTRACT of issue 16): value, std, lo, hi (2.5/97.5 %) per fitted name."""
-    params = {}
+#: Model variants ``calibrate --stats --variants`` refits under (findings §3-§5: what Table 2 cannot decide):
+#: the object's diffuse base and whether the mount is in the background capture.
+MODEL_VARIANTS = tuple({"diffuse_albedo": d, "mount_in_background": m} for d in (0.0, 0.1, 0.2, 0.3)
+                       for m in (False, True))
+
+
+def variant_fits(stats: StatsFile, comp, sensor, fit: StatsFit, *, seed: int = 0, maxeval: int = 150,
+                 progress=None) -> list[StatsFit]:
+    """Refits of ``fit``'s free parameters under each of :data:`MODEL_VARIANTS` (same data, same noise seed).
+
+    Their spread is the model's own uncertainty, which the SEMs' bootstrap does not see; their objectives say
+    how much the data prefer one variant.
+    """
+    out = []
+    start = {k: v for k, v in fit.values.items() if k not in SENSOR_PARAMS}
+    base = sensor.replace(**{k: float(fit.values[k]) for k in SENSOR_PARAMS})
+    for i, var in enumerate(MODEL_VARIANTS):
+        v0 = start | var
+        if "albedo" in fit.free:
+            v0["albedo"] = min(v0["albedo"], 1.0 - var["diffuse_albedo"])
+        out.append(fit_stats(stats, comp, base, v0, fit.free, seed=seed, maxeval=maxeval))
+        if progress is not None:
+            progress(i + 1, len(MODEL_VARIANTS))
+    return out
+
+
+def intervals(fit: StatsFit, samples: list[dict]) -> dict:
+    """Per fitted name: value, std (of the refits), lo and hi (their 2.5 and 97.5 % points, widened to hold the value).
+
+    Empty without at least two refits: a single fit carries no spread.
+    """
+    if len(samples) < 2:
+        return {}
+    out = {}
     for k in fit.free:
         v = float(fit.values[k])
         xs = np.array([s[k] for s in samples], float)
-        if xs.size >= 2:
-            params[k] = {"value": v, "std": float(xs.std(ddof=1)), "lo": float(np.percentile(xs, 2.5)),
-                         "hi": float(np.percentile(xs, 97.5))}
-        else:
-            params[k] = {"value": v, "std": None, "lo": None, "hi": None}
-    return {"sensor": sensor_name, "method": method, "parameters": params, "samples": samples}
+        out[k] = {"value": v, "std": float(xs.std(ddof=1)), "lo": min(v, float(np.percentile(xs, 2.5))),
+                  "hi": max(v, float(np.percentile(xs, 97.5)))}
+    return out
+
+
+def uncertainty_dict(sensor_name: str, fit: StatsFit, samples: list[dict]) -> dict | None:
+    """The parameter-uncertainty JSON of the sensor fields fitted (CONTRACT of issue 16,
+    :mod:`nlosplan.sensor_models.uncertainty`'s format): ``{"sensor", "parameters", "samples"}``.
+
+    Scene parameters and protocol nuisances are not sensor fields: their intervals go to the scene table
+    (:func:`intervals`). None when no sensor field was fitted or there are fewer than two refits.
+    """
+    iv = intervals(fit, samples)
+    names = [k for k in fit.free if k in SENSOR_PARAMS and k in iv]
+    if not names:
+        return None
+    return {"sensor": sensor_name, "parameters": {k: iv[k] for k in names},
+            "samples": [{k: float(s[k]) for k in names} for s in samples]}

@@ -35,7 +35,12 @@ def scene_table_path(sensor_file) -> Path:
 
 def parse_scene_table(data: dict, where: str) -> tuple[dict, dict]:
     """Validate a scene table's ``[scene]`` and ``[nuisances]`` (one-line errors naming the field)."""
-    check_keys(data, ("scene", "nuisances", "fit"), "table(s)", prefix=f"{where}: ")
+    check_keys(data, ("scene", "nuisances", "fit", "uncertainty"), "table(s)", prefix=f"{where}: ")
+    for k, v in data.get("uncertainty", {}).items():
+        if k not in SCENE_PARAMS + NUISANCE_PARAMS:
+            raise UserError(f"{where}: uncertainty.{k} is not a scene parameter or nuisance")
+        if not (isinstance(v, list) and len(v) == 4 and all(isinstance(x, (int, float)) for x in v)):
+            raise UserError(f"{where}: uncertainty.{k} must be [value, std, lo, hi]")
     out = []
     for table, keys in (("scene", SCENE_KEYS), ("nuisances", NUISANCE_PARAMS)):
         d = data.get(table)
@@ -68,8 +73,9 @@ def load_scene_table(path) -> tuple[dict, dict]:
     return parse_scene_table(data, str(p))
 
 
-def scene_table_toml(scene: dict, nuisances: dict, fit: dict | None = None) -> str:
-    """The TOML text of a scene table (``fit``: optional provenance strings and numbers)."""
+def scene_table_toml(scene: dict, nuisances: dict, fit: dict | None = None, uncertainty: dict | None = None) -> str:
+    """The TOML text of a scene table (``fit``: optional provenance strings and numbers; ``uncertainty``: name ->
+    {value, std, lo, hi} of fitted scene parameters and nuisances, written as ``name = [value, std, lo, hi]``)."""
     def val(v):
         return ("true" if v else "false") if isinstance(v, bool) else (f'"{v}"' if isinstance(v, str) else f"{v:.6g}")
 
@@ -77,6 +83,9 @@ def scene_table_toml(scene: dict, nuisances: dict, fit: dict | None = None) -> s
     lines += ["", "[nuisances]"] + [f"{k} = {val(nuisances[k])}" for k in NUISANCE_PARAMS]
     if fit:
         lines += ["", "[fit]"] + [f"{k} = {val(v)}" for k, v in fit.items()]
+    if uncertainty:
+        lines += ["", "[uncertainty]"] + [f"{k} = [{', '.join(val(p[f]) for f in ('value', 'std', 'lo', 'hi'))}]"
+                                          for k, p in uncertainty.items()]
     return "\n".join(lines) + "\n"
 
 

@@ -158,8 +158,9 @@ def _cmd_calibrate(args) -> int:
         from nlosplan.cli.calibrate_stats import run_stats
 
         return run_stats(args, t0)
-    if args.fit is not None or args.positions is not None:
-        raise UserError("--fit and --positions apply to --stats (and --positions to --score of a statistics file)")
+    if args.fit is not None or args.variants or (args.positions is not None and not args.score):
+        raise UserError("--fit, --variants and --positions apply to --stats (and --positions to --score of a "
+                        "statistics file)")
     if args.score:
         return calibrate_plane.run_score(args, t0)
     from nlosplan.files import check_output_file, check_plot_path
@@ -294,8 +295,12 @@ def add(sub) -> None:
                         "<stem>.scene.toml and <stem>.uncertainty.json (--bootstrap N: refits within the SEMs)")
     p.add_argument("--fit", metavar="NAME,...",
                    help="--stats: parameters to fit (default: photon_scale, dark_rate_hz, albedo and the nuisances)")
+    p.add_argument("--variants", action="store_true",
+                   help="--stats: also refit under the model variants Table 2 cannot decide (object diffuse base "
+                        "0-0.3, mount in or out of the background); their spread joins the uncertainty")
     p.add_argument("--positions", type=int_type(1, 100), metavar="N",
-                   help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10)")
+                   help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10; "
+                        "fewer cover only part of the gantry grid: 1 takes positions 0-29, a biased sample)")
     p.add_argument("--scene", metavar="FILE",
                    help="statistics files: the scene table ([scene], [nuisances] TOML) to score or start from "
                         "(default: the sensor file's <stem>.scene.toml, or a denali-tmf8828-* preset's own fit)")

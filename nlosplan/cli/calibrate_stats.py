@@ -26,21 +26,17 @@ def _free(text: str | None) -> tuple:
     return names
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
-
-
 def run_stats(args, t0: float) -> int:
     """Fit, bootstrap, write the sensor file, its scene table and its uncertainty JSON, print the per-row table."""
+    from nlosplan.calibration.bootstrap import MIN_RESAMPLES
     from nlosplan.calibration.stats_file import load_stats
-    from nlosplan.calibration.stats_fit import bootstrap, fit_stats, split, uncertainty_dict
-    from nlosplan.calibration.stats_model import components
+    from nlosplan.files import check_output_file, write_text
+    from nlosplan.calibration.stats_fit import (MODEL_VARIANTS, bootstrap, fit_stats, intervals, split,
+                                                uncertainty_dict, variant_fits)
+    from nlosplan.calibration.stats_model import SENSOR_PARAMS, components
     from nlosplan.calibration.stats_score import scene_for, scene_table_path, scene_table_toml, score_stats
     from nlosplan.reports.realism_table import format_table2
-    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.sensor_models import resolve_sensor, sensor_base
 
     for name in NOT_FOR_STATS:
         value = getattr(args, name, None)
@@ -49,19 +45,20 @@ def run_stats(args, t0: float) -> int:
                             "give either CAPTURES or --stats FILE, not both")
     if args.steps != "scale,pulse,noise":
         raise UserError("--steps does not apply to --stats (choose the fitted parameters with --fit)")
-    if args.bootstrap == 1:
-        raise UserError("--bootstrap 1: give 0 (none) or at least 2 refits for a spread")
+    if 0 < args.bootstrap < MIN_RESAMPLES:
+        raise UserError(f"bootstrap refits {args.bootstrap} < {MIN_RESAMPLES}: give at least {MIN_RESAMPLES} "
+                        "(30 or more for a 95 % interval)")
     free = _free(args.fit)
-    if args.out and Path(args.out).suffix not in (".toml", ".json"):
-        raise UserError(f"--out {args.out} must end in .toml or .json")
+    if args.out:  # before the fit, not after it
+        check_output_file(args.out, "--out", suffixes=(".toml", ".json"))
     args.positions = args.positions or 10
     stats = load_stats(args.stats)
     spec = args.sensor or "denali-tmf8828-3x3"
     sensor = resolve_sensor(spec)
-    scene, nuis, source = scene_for(spec, sensor, args.scene)
     zones = f"{sensor.zones_rows}x{sensor.zones_cols}"
     if zones not in stats.processing or not stats.rows_for(zones):
         raise UserError(f"{args.stats} has no rows for a {zones} sensor ({sensor.name})")
+    scene, nuis, source = scene_for(spec, sensor, args.scene)
     note(args, f"simulating {30 * args.positions} scenes per size for {sensor.name} ...")
     comp = components(sensor, stats.processing[zones].zone, n_positions=args.positions)
     start = {k: v for k, v in scene.items() if k != "mount"} | nuis
@@ -72,11 +69,24 @@ def run_stats(args, t0: float) -> int:
         with progress_bar(args, args.bootstrap, "bootstrap", "refit") as bar:
             samples = bootstrap(stats, comp, sensor, fit, args.bootstrap, seed=args.seed,
                                 progress=None if bar is None else (lambda done, total: bar.update(1)))
+    variants = []
+    if args.variants:
+        with progress_bar(args, len(MODEL_VARIANTS), "model variants", "refit") as bar:
+            variants = variant_fits(stats, comp, sensor, fit, seed=args.seed,
+                                    progress=None if bar is None else (lambda done, total: bar.update(1)))
+        samples = samples + [{k: float(r.values[k]) for k in fit.free} for r in variants]
     fitted, fscene, fnuis = split(fit.values, sensor)
     fscene["mount"] = bool(scene.get("mount", True))
     res = score_stats(stats, fitted, fscene, fnuis, comp=comp)
-    unc = uncertainty_dict(sensor.name, fit, samples,
-                           f"bootstrap over the SEMs and the Monte-Carlo noise ({len(samples)} refits)")
+    iv = intervals(fit, samples)
+    unc = uncertainty_dict(sensor.name, fit, samples)
+    parts = []
+    if args.bootstrap:
+        parts.append(f"{args.bootstrap} bootstrap refits (the statistics redrawn within their SEMs, a new noise seed "
+                     "each; scene sample and model held fixed)")
+    if variants:
+        parts.append(f"{len(variants)} model-variant refits (diffuse base 0-0.3 x mount in/out of the background)")
+    method = "spread of " + " and ".join(parts) if parts else "none (no --bootstrap, no --variants)"
     files = {}
     if args.out:
         out = Path(args.out)
@@ -84,26 +94,35 @@ def run_stats(args, t0: float) -> int:
                                        f"(objective {fit.objective:.4g}; {res['meets']['statistics']} of "
                                        f"{res['meets']['statistics_of']} row statistics, {res['meets']['ratios']} of "
                                        f"{res['meets']['ratios_of']} ratios within target).").strip())
-        _atomic_write(out, fitted.to_toml() if out.suffix == ".toml" else fitted.to_json())
+        base = sensor_base(spec)  # the refined preset, so that later model fields come from it
+        write_text(out, fitted.to_toml(base=base) if out.suffix == ".toml" else fitted.to_json(base=base))
         files["sensor"] = str(out)
         st = scene_table_path(out)
-        _atomic_write(st, scene_table_toml(fscene, fnuis, {"statistics": str(args.stats), "objective": fit.objective,
-                                                            "converged": fit.converged}))
+        write_text(st, scene_table_toml(fscene, fnuis, {"statistics": str(args.stats), "objective": fit.objective,
+                                                       "converged": fit.converged, "uncertainty": method},
+                                        {k: v for k, v in iv.items() if k not in SENSOR_PARAMS}))
         files["scene"] = str(st)
-        uj = out.with_name(out.stem + ".uncertainty.json")
-        _atomic_write(uj, json.dumps(unc, indent=1))
-        files["uncertainty"] = str(uj)
+        if unc is not None:
+            uj = out.with_name(out.stem + ".uncertainty.json")
+            write_text(uj, json.dumps(unc, indent=1))
+            files["uncertainty"] = str(uj)
     data = {"sensor": sensor.name, "statistics": str(args.stats), "fit": {
         "values": fit.values, "free": list(fit.free), "objective": fit.objective, "converged": fit.converged,
         "evaluations": fit.evaluations, "seconds": fit.seconds, "message": fit.message},
-        "uncertainty": unc, "score": res, "files": files, "seconds": time.perf_counter() - t0}
+        "variants": [{**{k: r.values[k] for k in ("diffuse_albedo", "mount_in_background")},
+                      "objective": r.objective, "converged": r.converged} for r in variants],
+        "uncertainty": unc, "intervals": iv, "uncertainty_method": method, "score": res, "files": files, "seconds": time.perf_counter() - t0}
     lines = [f"fitted {', '.join(fit.free)} of {sensor.name} to {args.stats} ({30 * args.positions} scenes per size, "
              f"noise seed {args.seed}): objective {fit.objective:.4g} after {fit.evaluations} evaluations"
              + ("" if fit.converged else f"; NOT converged: {fit.message}")]
     for k in fit.free:
-        p = unc["parameters"][k]
-        err = "" if p["std"] is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
+        p = iv.get(k)
+        err = "" if p is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
         lines.append(f"  {k:26s} {fit.values[k]:.5g}{err}")
+    lines.append(f"uncertainty: {method}")
+    for r in variants:
+        lines.append(f"  variant diffuse_albedo {r.values['diffuse_albedo']:g}, mount in background "
+                     f"{str(bool(r.values['mount_in_background'])).lower()}: objective {r.objective:.4g}")
     lines.append(format_table2(res))
     lines += [f"wrote {k}: {v}" for k, v in files.items()]
     emit(args, data, "\n".join(lines))
