@@ -77,13 +77,18 @@ class Components:
 
 
 def scene_pairs(n_positions: int) -> tuple:
-    """Every DENALI object at ``n_positions`` gantry positions spread over the grid (object i: i, i+s, ...)."""
+    """Every DENALI object at ``n_positions`` gantry positions spread over the grid (object i: k i, k i + s, ...).
+
+    ``s = 100 // n_positions`` and ``k = max(1, s // 30)``: with one position per object the 30 objects take
+    positions 0, 3, ..., 87 (rows 0-8 of the 10 x 10 grid), not 0-29 (the first three rows only).
+    """
     from nlosplan.denali import DENALI_OBJECTS
 
     if not 1 <= n_positions <= 100:
         raise UserError(f"positions per object must be 1-100, got {n_positions}")
     step = 100 // n_positions
-    return tuple((o, (i + j * step) % 100) for i, o in enumerate(DENALI_OBJECTS) for j in range(n_positions))
+    k = max(1, step // 30)
+    return tuple((o, (k * i + j * step) % 100) for i, o in enumerate(DENALI_OBJECTS) for j in range(n_positions))
 
 
 def linear_sensor(sensor: SensorConfig) -> SensorConfig:

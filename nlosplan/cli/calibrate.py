@@ -300,7 +300,7 @@ def add(sub) -> None:
                         "0-0.3, mount in or out of the background); their spread joins the uncertainty")
     p.add_argument("--positions", type=int_type(1, 100), metavar="N",
                    help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10; "
-                        "fewer cover only part of the gantry grid: 1 takes positions 0-29, a biased sample)")
+                        "fewer are a coarser sample of the gantry grid)")
     p.add_argument("--scene", metavar="FILE",
                    help="statistics files: the scene table ([scene], [nuisances] TOML) to score or start from "
                         "(default: the sensor file's <stem>.scene.toml, or a denali-tmf8828-* preset's own fit)")
