@@ -233,3 +233,13 @@ def test_calibrate_stats_bad_input_is_one_line_exit_2(argv, message):
     r = subprocess.run([sys.executable, "-m", "nlosplan", "calibrate", *argv], capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
     assert r.stderr.strip().count("\n") == 0 and message in r.stderr, r.stderr
+
+
+def test_8x8_preset_takes_the_early_residual_per_iteration():
+    from nlosplan.calibration.stats_score import scene_for
+
+    s3, s8 = preset("denali-tmf8828-3x3"), preset("denali-tmf8828-8x8")
+    _, n3, _ = scene_for("denali-tmf8828-3x3", s3)
+    _, n8, _ = scene_for("denali-tmf8828-8x8", s8)
+    assert n8["early_residual_counts"] == pytest.approx(n3["early_residual_counts"] / 1000)
+    assert n8["background_offset_on"] == n3["background_offset_on"]

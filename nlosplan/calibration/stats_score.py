@@ -111,7 +111,7 @@ def scene_for(sensor_spec, sensor: SensorConfig, scene_file=None) -> tuple[dict,
     from nlosplan.sensor_models import presets_denali as d
 
     if sensor.name in ("denali-tmf8828-3x3", "denali-tmf8828-8x8"):
-        return dict(d.DENALI_SCENE_FIT), dict(d.DENALI_NUISANCES_FIT), f"{sensor.name}'s Table-2 fit"
+        return dict(d.DENALI_SCENE_FIT), d.denali_nuisances(sensor.name[-3:]), f"{sensor.name}'s Table-2 fit"
     raise UserError(f"no scene table for {sensor.name}: give --scene FILE (a [scene] and [nuisances] TOML, as "
                     "'calibrate --stats' writes beside its sensor file) or score a denali-tmf8828-* preset")
 

@@ -47,6 +47,17 @@ DENALI_NUISANCES_FIT: dict = {
     "early_residual_counts": 48.76,
     "early_residual_decay_bins": 2.716,
 }
+
+
+def denali_nuisances(zones: str) -> dict:
+    """The Table-2 fit's protocol nuisances for a zone mode: the 3x3 fit's, with the early residual (counts per
+    capture) scaled by the iterations (8x8: 10,240 / 10,240,000), the background offsets (fractions of the floor)
+    kept."""
+    out = dict(DENALI_NUISANCES_FIT)
+    out["early_residual_counts"] *= DENALI_ITERATIONS[zones] / DENALI_ITERATIONS["3x3"]
+    return out
+
+
 #: Intervals of the fitted scene parameters and nuisances, (value, std, lo, hi): the spread of 40 bootstrap refits
 #: within the SEMs and 8 model-variant refits (diffuse base 0-0.3 x mount in/out of the background).
 DENALI_SCENE_INTERVALS: dict = {
