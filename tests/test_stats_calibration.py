@@ -227,6 +227,7 @@ def test_calibrate_stats_cli_writes_sensor_scene_table_and_uncertainty(tmp_path)
     (["--variants"], "--fit, --variants and --positions apply to --stats"),
     (["--stats", "denali-table2", "--sensor", "tmf8828-4x4-short"], "has no rows for a 4x4 sensor"),
     (["--fit", "albedo"], "--fit, --variants and --positions apply to --stats"),
+    (["--stats", "denali-table2", "--holdout", "0.3"], "--holdout does not apply to --stats"),
     (["--stats", "nope.toml"], "nope.toml"),
 ])
 def test_calibrate_stats_bad_input_is_one_line_exit_2(argv, message):

@@ -11,7 +11,7 @@ from nlosplan.errors import UserError
 
 #: Options of ``calibrate`` that fit plane or DENALI captures, not statistics.
 NOT_FOR_STATS = ("captures", "score", "model", "terms", "folds", "where", "fidelity", "zones", "start", "lights",
-                 "min_distance", "pulse")
+                 "min_distance", "pulse", "trust_pickle")
 
 
 def _free(text: str | None) -> tuple:
@@ -43,6 +43,8 @@ def run_stats(args, t0: float) -> int:
         if value not in (None, False):
             raise UserError(f"--{name.replace('_', '-')} does not apply to --stats" if name != "captures" else
                             "give either CAPTURES or --stats FILE, not both")
+    if args.holdout:
+        raise UserError("--holdout does not apply to --stats (a statistics file has no captures to hold out)")
     if args.steps != "scale,pulse,noise":
         raise UserError("--steps does not apply to --stats (choose the fitted parameters with --fit)")
     if 0 < args.bootstrap < MIN_RESAMPLES:
