@@ -297,7 +297,10 @@ CASES = [
     ("bench-out-file", BENCH + ["--store", "{F}/store.sqlite", "--out", "{F}/afile"], "is a file; give a folder",
      ("{F}/afile", "{F}/store.sqlite"), ()),
     # ---- evaluate
-    ("crlb-repeats0", CRLB + ["--repeats", "0"], "argument --repeats: 0 must be >= 1", (), ()),
+    ("crlb-repeats0", CRLB + ["--repeats", "0"], "argument --repeats: 0 is out of range; allowed: 1 to 1000000",
+     (), ()),
+    ("crlb-repeats-huge", CRLB + ["--repeats", BIG], "argument --repeats", (), ()),
+    ("active-config-binary", ["study", "active-vs-raster", "--config", "{F}/bin.toml"], "is a binary file", (), ()),
     ("crlb-nuisance", CRLB + ["--nuisance", "none,ambient"], "--nuisance none cannot be combined", (), ()),
     ("crlb-sensor-empty", CRLB + ["--sensor", "{F}/empty.toml"], "the file is empty", (), ()),
     ("crlb-photon-neg", CRLB + ["--photon-scale", "-1"], "argument --photon-scale: -1 must be >= 0", (), ()),

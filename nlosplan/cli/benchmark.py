@@ -76,7 +76,9 @@ BENCHMARK_DESCRIPTION = f"""\
 Train and test the DENALI benchmark models (MLP, 1D CNN, 3D CNN, Transformer)
 on its three tasks (localization, 30-way shape, 4 in vs 8 in size) and print
 the paper's table: models as rows; per task the metrics overall and by size,
-class group (numbers, letters, shapes) and near/far quadrant.
+class group (numbers, letters, shapes) and near/far quadrant. Localization
+RMSE (loc_rmse) is DENALI's: sqrt of the mean of the squared x and y errors
+pooled over the N x 2 entries (not the 2-D distance, which is sqrt 2 larger).
 
 Data: the captures of --store that match --where, each scene's repeats
 averaged (as DENALI). Split: 70/30 random (stratified for classification,

@@ -89,6 +89,7 @@ def _cmd_crlb(args) -> int:
         m = r.meta
         per_scene.append({"object": m.get("object"), "size": m.get("size"), "position": m.get("position"),
                           "rmse_bound_m": _finite(r.rmse_bound_m), "rmse_bound_known_m": _finite(r.rmse_bound_known_m),
+                          "loc_rmse_bound_m": _finite(r.loc_rmse_bound_m),
                           "std_m": [_finite(float(v)) for v in r.std_m],
                           "identifiable": bool(r.position_identifiable), "reason": r.reason,
                           "notes": list(r.notes)})
@@ -98,6 +99,7 @@ def _cmd_crlb(args) -> int:
             bad_lines.append(f"  {m.get('object')} {m.get('size')} position {m.get('position')}: NOT IDENTIFIABLE"
                              f" ({r.reason or 'no information on the position'})")
     data = {"rms_bound_m": _finite(batch.rms_bound_m), "rms_bound_known_m": _finite(batch.rms_bound_known_m),
+            "loc_rmse_bound_m": _finite(batch.loc_rmse_bound_m),
             "unidentifiable": [per_scene[i] | {"index": i} for i in batch.unidentifiable],
             "seconds": batch.seconds, "fidelity": batch.fidelity, "knobs": batch.knobs,
             "sensor": sensor.name, "lights": args.lights, "repeats": args.repeats, "nuisance": list(nuisance),
@@ -112,6 +114,9 @@ def _cmd_crlb(args) -> int:
         lines.append("")
     notes = sorted({n for r in batch.results for n in r.notes})
     lines += [f"note: {n}" for n in notes] + [batch.summary()]
+    if math.isfinite(batch.loc_rmse_bound_m):  # the figure to set beside a model's loc_rmse (benchmark, design)
+        lines.append(f"bound on DENALI's loc_rmse (x and y pooled: the 2-D bound / sqrt 2): "
+                     f"{1e3 * batch.loc_rmse_bound_m:.3g} mm")
     emit(args, data, "\n".join(lines))
     return 0
 
@@ -247,8 +252,9 @@ def add(sub) -> None:
     _common(c, jitter=True)
     c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["8in"], metavar="4in,8in",
                    help="object sizes (default: 8in)")
-    c.add_argument("--repeats", type=int_type(1), default=1,
-                   help="independent captures per scene (default: 1; the bound scales as 1/sqrt(repeats))")
+    c.add_argument("--repeats", type=int_type(1, 1_000_000), default=1,
+                   help="independent captures per scene, 1 to 1,000,000 (default: 1; the bound scales as "
+                        "1/sqrt(repeats))")
     c.add_argument("--nuisance", type=_choices(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
                    help="nuisance parameters estimated with the position, among photon_scale, ambient, dark, "
                         "albedo, or 'none' (default: photon_scale)")

@@ -22,7 +22,7 @@ __all__ = ["benchmark_markdown", "benchmark_table", "benchmark_text", "not_appli
 
 TASK_TITLES = {"loc": "Localization (x, y), metres", "shape": "Shape classification (30-way), %",
                "size": "Size classification (4 in vs 8 in), %"}
-_METRIC_LABELS = {"rmse": "RMSE", "mae": "MAE", "top1_acc": "Top-1", "top5_acc": "Top-5", "macro_f1": "F1",
+_METRIC_LABELS = {"loc_rmse": "RMSE", "mae": "MAE", "top1_acc": "Top-1", "top5_acc": "Top-5", "macro_f1": "F1",
                   "macro_precision": "Precision", "macro_recall": "Recall"}
 
 

@@ -28,14 +28,14 @@ __all__ = ["METRIC_ORDER", "jitter_markdown", "jitter_table", "jitter_text", "le
            "write_jitter"]
 
 #: Metrics shown per task, in table order (the study's: RMSE/MAE; top-1/top-5/F1; accuracy/precision/recall).
-METRIC_ORDER: dict[str, tuple[str, ...]] = {"loc": ("rmse", "mae"), "shape": ("top1_acc", "top5_acc", "macro_f1"),
+METRIC_ORDER: dict[str, tuple[str, ...]] = {"loc": ("loc_rmse", "mae"), "shape": ("top1_acc", "top5_acc", "macro_f1"),
                                             "size": ("top1_acc", "macro_precision", "macro_recall")}
-_LABELS = {("loc", "rmse"): "loc RMSE m", ("loc", "mae"): "loc MAE m", ("shape", "top1_acc"): "shape top-1 %",
+_LABELS = {("loc", "loc_rmse"): "loc RMSE m", ("loc", "mae"): "loc MAE m", ("shape", "top1_acc"): "shape top-1 %",
            ("shape", "top5_acc"): "shape top-5 %", ("shape", "macro_f1"): "shape F1 %",
            ("size", "top1_acc"): "size acc %", ("size", "macro_precision"): "size prec %",
            ("size", "macro_recall"): "size rec %"}
 #: What each panel of the figure shows: (task, metric, y label, scale to display units).
-PANELS = {"loc": ("rmse", "localization RMSE (cm)", 100.0), "shape": ("top1_acc", "shape top-1 accuracy (%)", 100.0),
+PANELS = {"loc": ("loc_rmse", "localization RMSE (cm)", 100.0), "shape": ("top1_acc", "shape top-1 accuracy (%)", 100.0),
           "size": ("top1_acc", "size accuracy, 4 in vs 8 in (%)", 100.0)}
 _TITLES = {"loc": "Localization", "shape": "Shape ({n}-way)", "size": "Size (4 in vs 8 in)"}
 

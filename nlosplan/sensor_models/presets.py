@@ -238,7 +238,6 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
-#: Fields a sensor file without ``base`` may leave out (labels, and the optional measured pulse).
 #: Fields a complete sensor file may leave out: the labels, and the optional terms whose unset value (None) means
 #: "not modelled" (a measured pulse shape, per-zone terms, dead time), never a generic number.
 OPTIONAL_FILE_FIELDS = ("name", "notes") + tuple(f.name for f in dataclasses.fields(SensorConfig) if f.default is None)
@@ -302,10 +301,13 @@ def sensor_base(spec) -> str | None:
 
 
 def uncertainty(name: str) -> dict | None:
-    """The parameter-uncertainty JSON shipped with a calibrated preset, or None for a preset without one.
+    """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
+    :mod:`nlosplan.sensor_models.uncertainty`, package data ``data/<name>.uncertainty.json``), or None.
 
-    Layout (issue 16's contract): ``{"sensor": name, "parameters": {field or denali_scene keyword: {"value", "std",
-    "lo", "hi"}}, "samples": [{name: value}, ...], ...}``.
+    ``denali-tmf8828-3x3`` ships one (``nlosplan calibrate --stats denali-table2 --bootstrap 40 --variants``:
+    photon scale and floor). The other presets' measured values carry line-fit errors only
+    (:data:`MEASURED`), not a calibration's joint uncertainty; the design planner's worlds then draw only
+    from their declared ranges.
 
     Raises
     ------

@@ -217,6 +217,16 @@ class CRLBResult:
     notes: tuple = ()
 
     @property
+    def loc_rmse_bound_m(self) -> float:
+        """Bound on DENALI's pooled ``loc_rmse`` (metres): ``sqrt((var_0 + var_1) / 2)`` = ``rmse_bound_m / sqrt(2)``.
+
+        ``rmse_bound_m`` bounds the 2-D RMS distance (the covariance's trace is a
+        2-D mean square); ``loc_rmse`` averages over the x and y entries, so the
+        trace is halved under the root before the two are compared.
+        """
+        return self.rmse_bound_m / math.sqrt(2.0)
+
+    @property
     def nuisance_price(self) -> float:
         """``rmse_bound_m / rmse_bound_known_m`` (>= 1): the cost of estimating the nuisances."""
         if not (math.isfinite(self.rmse_bound_m) and self.rmse_bound_known_m > 0):
@@ -248,8 +258,9 @@ class CRLBBatchResult:
     ----------
     results : list of CRLBResult
     rms_bound_m : float
-        ``sqrt(mean_s rmse_bound_m(s)^2)``: the bound on a model's RMSE over
-        these scenes (``inf`` if any scene's position is not identifiable).
+        ``sqrt(mean_s rmse_bound_m(s)^2)``: the bound on a model's 2-D RMS distance
+        error over these scenes (``inf`` if any scene's position is not
+        identifiable); :attr:`loc_rmse_bound_m` bounds DENALI's pooled RMSE.
     rms_bound_known_m : float
         The same with the nuisance parameters known.
     unidentifiable : list of int
@@ -267,6 +278,11 @@ class CRLBBatchResult:
     seconds: float
     fidelity: str
     knobs: dict
+
+    @property
+    def loc_rmse_bound_m(self) -> float:
+        """Bound on DENALI's pooled ``loc_rmse`` over these scenes: ``rms_bound_m / sqrt(2)`` (see :class:`CRLBResult`)."""
+        return self.rms_bound_m / math.sqrt(2.0)
 
     def summary(self) -> str:
         """One line."""

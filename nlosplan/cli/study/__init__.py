@@ -126,8 +126,9 @@ alone). Every capture is blurred by Gaussian timing jitter of FWHM J ps
 (exact re-binning through the Gaussian; default J = 0, 50, 100, 600) for
 training AND for testing, then each scene's repeats are averaged and the
 benchmark models are trained and tested on the three tasks at every level:
-localization (RMSE, MAE in m), 30-way shape (top-1, top-5, macro F1) and
-4 in vs 8 in size (accuracy, precision, recall). The split depends only on
+localization (RMSE, MAE in m; DENALI's loc_rmse, x and y errors pooled),
+30-way shape (top-1, top-5, macro F1) and 4 in vs 8 in size (accuracy,
+precision, recall). The split depends only on
 the labels and --seed, so every level trains and tests on the same scenes.
 
 Data: the captures of --store that match --where (zones={STUDY_ZONES} unless

@@ -18,9 +18,21 @@ keeps the default of the chosen mode)::
 
     [search]                     # SearchConfig (fidelity as a table of tables)
     seeds = 3
+    seed = 0                     # the run's seed (--seed): noise, splits and training seeds
+    models = ["mlp", "cnn1d"]    # candidate learners (--models); the best per task is used
+    max_seeds = 8                # most seeds of an undecided candidate
+    budget = 30                  # extra evaluations to decide undecided candidates
 
     [scenes]                     # SceneSet: simulated scenes of the evaluators
     positions_stride = 2
+
+    [worlds]                     # WorldsConfig: plausible worlds the answer must hold in
+    count = 8                    # --worlds
+    quorum = 0.9                 # a minimum design must be met in this fraction of them
+    scene_step = 2               # worlds simulate every 2nd position of the run's scenes
+    [worlds.ranges]              # what no data pins down (replaces the defaults when given)
+    albedo = {low = 0.3, high = 0.7}
+    photon_scale = {low = 0.5, high = 2.0, relative = true, log = true}
 """
 
 from __future__ import annotations
@@ -38,6 +50,7 @@ from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requireme
 from nlosplan.planner.design.run import DesignConfig
 from nlosplan.planner.design.search import SearchConfig
 from nlosplan.planner.design.space import DesignSpace, parse_zones
+from nlosplan.planner.design.worlds import WorldsConfig
 
 __all__ = ["full_config", "quick_config", "load_config", "QUICK_OBJECTS"]
 
@@ -59,10 +72,12 @@ def quick_config() -> DesignConfig:
     fid["trained"]["epochs"] = 20
     space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
                         axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
-    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid)
+    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid,
+                          max_seeds=4, budget=8)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
-    return DesignConfig(space=space, search=search, scenes=scenes, label="quick")
+    worlds = WorldsConfig(count=4, scene_step=2, candidates=2)
+    return DesignConfig(space=space, search=search, scenes=scenes, label="quick", worlds=worlds)
 
 
 def _schema() -> dict:
@@ -108,7 +123,7 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
     """
     p = Path(path)
     data = load_table(p, "configuration file", suffixes=(".toml",))
-    check_keys(data, ("space", "requirements", "cost", "search", "scenes"), "table(s)", prefix=f"{p}: ")
+    check_keys(data, ("space", "requirements", "cost", "search", "scenes", "worlds"), "table(s)", prefix=f"{p}: ")
     types = _schema()
     cfg = base
     if "space" in data:
@@ -140,6 +155,8 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
             cfg = replace(cfg, search=replace(base.search, fidelity=fid, **s))
         except TypeError as exc:
             raise UserError(f"{p}: [search]: {exc}") from None
+        except UserError as exc:
+            raise UserError(f"{p}: {exc}") from None
     if "scenes" in data:
         s = dict(check_types(_table(data, "scenes", str(p)), types["scenes"], f"{p}: [scenes]"))
         stride = s.pop("positions_stride", None)
@@ -149,6 +166,16 @@ def load_config(path, base: DesignConfig) -> DesignConfig:
             cfg = replace(cfg, scenes=replace(base.scenes, **s))
         except TypeError as exc:
             raise UserError(f"{p}: [scenes]: {exc}") from None
+    if "worlds" in data:
+        try:
+            cfg = replace(cfg, worlds=WorldsConfig.from_dict(_table(data, "worlds", str(p)), base.worlds))
+        except UserError as exc:
+            raise UserError(f"{p}: {exc}") from None
+        for r in cfg.worlds.ranges or ():
+            try:
+                r.check(cfg.space.sensor)
+            except UserError as exc:
+                raise UserError(f"{p}: {exc}") from None
     return cfg
 
 

@@ -8,7 +8,9 @@ configuration and the optimize stage's candidates, rewritten atomically) and
 design, evaluator, fidelity, metric, interval, run time and status; one line
 appended and flushed per result). ``resume=True`` ingests everything in it,
 so nothing already evaluated is computed again. The simulated references are
-saved beside it and reused when their configuration matches.
+saved beside it and reused when their configuration matches; they, and the
+worlds' references (:mod:`~nlosplan.planner.design.worlds`), are simulated
+on the executor, one job per zone layout and world.
 """
 
 from __future__ import annotations
@@ -20,21 +22,24 @@ import os
 import platform
 import subprocess
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
+from nlosplan.planner.design import robust
 from nlosplan.planner.design.cost import CostModel
-from nlosplan.planner.design.data import SceneSet, reference_from_dataset, simulate_reference
+from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.executors import make_executor
+from nlosplan.planner.design.jobs import ReferenceJob
 from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, optimize_jobs
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
-from nlosplan.planner.design.search import DesignSearch, SearchConfig
+from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
+from nlosplan.planner.design.worlds import WorldsConfig, draw_worlds, world_sensor
 from nlosplan.sensor_models import resolve_sensor
 
 __all__ = ["DesignConfig", "run_design", "read_evaluations", "CHECKPOINT", "EVALUATIONS"]
@@ -64,6 +69,8 @@ class DesignConfig:
         Preset or sensor file of the real captures (default: the space's reference).
     label : str
         ``"full"`` or ``"quick"`` (for the report).
+    worlds : WorldsConfig
+        The plausible worlds the cheapest met candidates are checked in (not with ``real``).
     """
 
     space: DesignSpace = field(default_factory=DesignSpace)
@@ -75,12 +82,14 @@ class DesignConfig:
     real_where: dict | None = None
     capture_sensor: str | None = None
     label: str = "full"
+    worlds: WorldsConfig = field(default_factory=WorldsConfig)
 
     def to_dict(self) -> dict:
         return {"space": self.space.to_dict(), "requirements": [r.to_dict() for r in self.requirements],
                 "cost": self.cost.to_dict(), "search": self.search.to_dict(),
                 "scenes": None if self.scenes is None else self.scenes.to_dict(), "real": self.real,
-                "real_where": self.real_where, "capture_sensor": self.capture_sensor, "label": self.label}
+                "real_where": self.real_where, "capture_sensor": self.capture_sensor, "label": self.label,
+                "worlds": self.worlds.to_dict()}
 
     def hash(self) -> str:
         return hashlib.sha1(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:12]
@@ -105,7 +114,8 @@ def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
             versions[pkg] = md.version(pkg)
         except md.PackageNotFoundError:
             versions[pkg] = "not installed"
-    return {"config": cfg.to_dict(), "config_hash": cfg.hash(), "seeds": list(range(cfg.search.seeds)),
+    return {"config": cfg.to_dict(), "config_hash": cfg.hash(), "seed": cfg.search.seed,
+            "seeds": f"evaluation seeds {cfg.search.seed} x {SEED_STRIDE} + i (i: a design's i-th run)",
             "versions": versions, "git_revision": _git_revision(), "wall_seconds": seconds,
             "executor": executor_name, "python": platform.python_version(), "machine": platform.machine(),
             "cpus": os.cpu_count()}
@@ -245,23 +255,41 @@ def _json_default(o):
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
 
 
-def _references(cfg: DesignConfig, out: Path, say) -> tuple[dict, dict, dict]:
+def _layout_design(space: DesignSpace, layout) -> Design:
+    """The design a layout's reference is simulated at (least blur, all bins and photons of the space)."""
+    return Design(layout, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
+
+
+def _simulate(executor, jobs: list[ReferenceJob], say, what: str) -> dict:
+    """Run reference jobs on the executor (in parallel); ``label -> seconds``. A failure stops the run."""
+    out = {}
+    for i, (job, res) in enumerate(executor.map(build_reference, jobs)):
+        if res.get("status") != "ok":
+            raise RuntimeError(f"simulating the {job.label} reference failed: {res.get('reason')}")
+        out[job.label] = res["seconds"]
+        say(f"{what}: {job.label}", i + 1, len(jobs))
+    return out
+
+
+def _references(cfg: DesignConfig, out: Path, say, executor) -> tuple[dict, dict, dict]:
     """Simulated reference per zone layout (reused when saved with the same key); real ones if asked."""
     from nlosplan.planner.design.data import load_reference
 
-    sims, real, info = {}, {}, {}
+    sims, real, info, jobs = {}, {}, {}, []
     space, scenes = cfg.space, cfg.scenes
     for z in space.zones:
-        ref_design = Design(z, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
-        sensor = ref_design.sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
+        sensor = _layout_design(space, z).sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
         path = out / "reference" / f"{z[0]}x{z[1]}_{scenes.key(sensor)}.npz"
-        if not path.exists():
-            say(f"simulating the {z[0]}x{z[1]} reference")
-            simulate_reference(sensor, scenes, progress=say).save(path)
-        ref = load_reference(path)
         sims[f"{z[0]}x{z[1]}"] = path
-        info[f"{z[0]}x{z[1]}"] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
-                                   "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
+        if not path.exists():
+            jobs.append(ReferenceJob(str(path), sensor, scenes, f"{z[0]}x{z[1]}"))
+    if jobs:
+        say(f"references: simulating {len(jobs)} ({scenes.n_scenes} scenes each)")
+        _simulate(executor, jobs, say, "references")
+    for layout, path in sims.items():
+        ref = load_reference(path)
+        info[layout] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
+                        "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
     if cfg.real:
         captured = resolve_sensor(cfg.capture_sensor or space.reference)
         ds = load_dataset(cfg.real, {**(cfg.real_where or {}), "zones": f"{captured.zones_rows}x{captured.zones_cols}"},
@@ -337,6 +365,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     out = Path(out)
     say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
     check_inputs(cfg)
+    worlds = None if cfg.real else _world_plan(cfg)  # a bad calibration uncertainty stops the run before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume, overwrite=overwrite, repair=repair,
                        say=lambda text: say(f"checkpoint: {text}"))
@@ -348,7 +377,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     try:
         with writing(kept=f"every evaluation finished so far is kept in {ckpt.log}",
                      cont="free some space and rerun with --resume"):
-            result, stability = _search(cfg, out, ckpt, executor, say)
+            result, stability = _search(cfg, out, ckpt, executor, say, worlds)
         executor_name = executor.name
     finally:
         executor.close()
@@ -358,10 +387,13 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     return result
 
 
-def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say) -> tuple[dict, dict | None]:
+def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
+            worlds: robust.WorldPlan | None) -> tuple[dict, dict | None]:
     """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
-    sims, real, ref_info = _references(cfg, out, lambda text, *a: say(f"references: {text}", *a))
-    search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
+    sims, real, ref_info = _references(cfg, out, say, executor)
+    if worlds is not None and cfg.worlds.scene_step == 1:  # the worlds' scenes are the run's: world 0 is its own
+        worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
+    search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None, worlds)
     search.ingest(ckpt.results)
     if ckpt.data.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
@@ -380,6 +412,11 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say) -> t
                 ckpt.save()
             search.set_candidates(cands, ckpt.data["optimize_log"])
             continue
+        if not jobs and search.stage == "worlds" and worlds is not None:
+            need = robust.needed_references(search)
+            if need:
+                search.add_world_references(_world_references(cfg, out, worlds, need, executor, say))
+                continue
         if not jobs:
             break
         total = done + len(jobs)
@@ -390,7 +427,40 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say) -> t
             done += 1
             say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
                 done, total)
+    say("stability: the catalog" if not cfg.label.startswith("quick") else "summary: writing")
     stability = _stability(cfg.label.startswith("quick"))
     result = summarize(search)
     result["_refs"] = ref_info
     return result, stability
+
+
+def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
+    """The run's worlds (drawn from its seed) and their scenes."""
+    from nlosplan.sensor_models.uncertainty import uncertainty_for
+
+    space, wcfg = cfg.space, cfg.worlds
+    unc, unc_source = uncertainty_for(space.reference)
+    worlds = draw_worlds(wcfg, space.sensor, cfg.scenes.lights, cfg.search.seed, unc)
+    step = wcfg.scene_step
+    scenes = replace(cfg.scenes, positions=cfg.scenes.positions[::step], crlb_objects=())
+    ranges = [r for r in wcfg.resolved_ranges(cfg.scenes.lights) if r.name not in (unc or {}).get("parameters", {})]
+    sources = [f"declared ranges: {', '.join(r.name for r in ranges)}" if ranges else "no declared ranges",
+               f"calibrated: {', '.join(unc['parameters'])} ({unc_source})" if unc else f"no calibration ({unc_source})"]
+    return robust.WorldPlan(wcfg, worlds, scenes, cfg.scenes.n_scenes / scenes.n_scenes, sources=sources)
+
+
+def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need, executor, say) -> dict:
+    """Simulate the references ``need`` lists (``(world, layout)``) on the executor; ``(index, layout) -> path``."""
+    from nlosplan.planner.design.space import parse_zones
+
+    jobs, paths = [], {}
+    for w, layout in need:
+        sensor = world_sensor(_layout_design(cfg.space, parse_zones(layout)), cfg.space.sensor, w.sensor)
+        sensor = sensor.replace(name=f"reference {layout}, world {w.index}")
+        scenes = replace(plan.scenes, scene_kwargs=w.scene)
+        path = out / "reference" / f"world{w.index}_{layout}_{scenes.key(sensor)}.npz"
+        paths[(w.index, layout)] = str(path)
+        jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
+    say(f"worlds: simulating {len(jobs)} reference(s) ({plan.scenes.n_scenes} scenes each)")
+    _simulate(executor, jobs, say, "worlds")
+    return paths
