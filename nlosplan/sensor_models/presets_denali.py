@@ -69,8 +69,8 @@ DENALI_SCENE_INTERVALS: dict = {
 }
 #: Provenance shown by ``nlosplan sensor show`` / ``sensor list``.
 DENALI_PROVENANCE = (
-    "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6), 128 bins: facts of DENALI's capture code. "
-    "Time base and 32-sample pulse: TMF882x MEAS; pulse tail: the plane unit's (chip physics). No per-zone terms "
+    "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6): facts of DENALI's capture code; zones, "
+    "128 bins, 24-bit: DS. Time base and 32-sample pulse: TMF882x MEAS; pulse tail: the plane unit's (chip physics). No per-zone terms "
     "(unknown for this unit). Photon scale, floor in the dark (dark_rate_hz: external IR, not SPAD dark counts) and "
     "lights-on extra (ambient_rate_hz): fitted by 'nlosplan calibrate --stats' on DENALI Table 2 "
     "(calibration/data/denali_table2.toml) with the checkpoint levels. {scores}"
