@@ -8,7 +8,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
-from nlosplan.sensor_models.presets import PRESET_NAMES, uncertainty
+from nlosplan.sensor_models.presets import PRESET_NAMES, preset_uncertainty
 from nlosplan.sensor_models.uncertainty import load_uncertainty, uncertainty_for, uncertainty_path, validate_uncertainty
 
 GOOD = {"sensor": "tmf8828-3x3-short",
@@ -25,11 +25,11 @@ def _write(tmp_path, data) -> str:
 
 
 def test_only_the_calibrated_denali_preset_ships_uncertainty_and_unknown_names_are_refused():
-    assert [name for name in PRESET_NAMES if uncertainty(name) is not None] == ["denali-tmf8828-3x3"]
+    assert [name for name in PRESET_NAMES if preset_uncertainty(name) is not None] == ["denali-tmf8828-3x3"]
     data, where = uncertainty_for("denali-tmf8828-3x3")  # validated on the way
     assert where == "preset denali-tmf8828-3x3" and set(data["parameters"]) == {"photon_scale", "dark_rate_hz"}
     with pytest.raises(UserError, match="unknown sensor preset 'tmf9999'"):
-        uncertainty("tmf9999")
+        preset_uncertainty("tmf9999")
     data, where = uncertainty_for("tmf8828-3x3-short")
     assert data is None and "ships no parameter uncertainty" in where
 

@@ -13,7 +13,7 @@ from nlosplan.calibration.stats_file import load_stats, parse_stats, shipped_pat
 from nlosplan.calibration.stats_fit import fit_stats, split
 from nlosplan.calibration.stats_model import Components, Noise, simulate_rows, statistics
 from nlosplan.errors import UserError
-from nlosplan.sensor_models import preset, uncertainty
+from nlosplan.sensor_models import preset, preset_uncertainty
 
 
 def _shipped_tables() -> dict:
@@ -153,7 +153,7 @@ def test_denali_presets_facts_provenance_and_uncertainty():
     assert (s3.fov_x_deg, s3.fov_y_deg) == (41.0, 52.0) and s3.zone_gains is None and s3.time_walk_ps == 0.0
     assert 0.25 < s3.photon_scale < 0.32 and 1.1e6 < s3.dark_rate_hz < 1.4e6
     assert "Table 2" in s3.notes and "calibrate --stats" in s3.notes
-    u = uncertainty("denali-tmf8828-3x3")
+    u = preset_uncertainty("denali-tmf8828-3x3")
     assert set(u) == {"sensor", "parameters", "samples"} and u["sensor"] == "denali-tmf8828-3x3"
     assert set(u["parameters"]) == {"photon_scale", "dark_rate_hz"}  # sensor fields only (the contract)
     for k, p in u["parameters"].items():
@@ -166,9 +166,9 @@ def test_denali_presets_facts_provenance_and_uncertainty():
         validate_uncertainty = None
     if validate_uncertainty is not None:
         assert validate_uncertainty(u)["parameters"]["photon_scale"]["value"] == pytest.approx(s3.photon_scale, 1e-3)
-    assert uncertainty("tmf8828-4x4-short") is None
+    assert preset_uncertainty("tmf8828-4x4-short") is None
     with pytest.raises(UserError, match="unknown sensor preset"):
-        uncertainty("nope")
+        preset_uncertainty("nope")
 
 
 def test_sensor_show_and_list_show_the_provenance():

@@ -34,10 +34,10 @@ def _cmd_sensor_list(args) -> int:
 
 
 def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import PRESET_NAMES, resolve_sensor, sensor_base, uncertainty
+    from nlosplan.sensor_models import PRESET_NAMES, resolve_sensor, sensor_base, preset_uncertainty
 
     s = resolve_sensor(args.name)
-    unc = uncertainty(args.name) if args.name in PRESET_NAMES else None
+    unc = preset_uncertainty(args.name) if args.name in PRESET_NAMES else None
     if args.toml:  # with its base preset, so that a saved copy takes later model fields from it
         print(s.to_toml(base=sensor_base(args.name)))
     elif args.json:

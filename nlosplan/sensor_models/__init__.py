@@ -25,7 +25,7 @@ from nlosplan.sensor_models.pipeline import (
     sample_histogram,
 )
 from nlosplan.sensor_models.presets import (PRESET_NAMES, load_sensor_file, preset, resolve_sensor, sensor_base,
-                                            uncertainty)
+                                            preset_uncertainty)
 from nlosplan.sensor_models.transient import (TimeGrid, bin_nodes_without_irf, deposit, deposit_at, irf_extent_ps,
                                               irf_matrix)
 from nlosplan.sensor_models.zones import flash_intensity, solid_angle_rect, zone_edges_tan, zone_rays, zone_solid_angles
@@ -36,6 +36,6 @@ __all__ = [
     "degrade_counts", "degrade_expected", "degrade_linear", "deposit", "deposit_at", "expected_counts",
     "expected_histogram", "flash_intensity", "impulse_fwhm_ps", "impulse_sigma_ps", "irf_extent_ps", "irf_matrix",
     "load_sensor_file", "pileup_expected", "preset", "pulse_boxes", "reach", "resolve_sensor", "sample_counts",
-    "sample_histogram", "sample_poisson", "saturate", "sensor_base", "solid_angle_rect", "uncertainty", "zone_edges_tan",
+    "sample_histogram", "sample_poisson", "saturate", "sensor_base", "solid_angle_rect", "preset_uncertainty", "zone_edges_tan",
     "zone_rays", "zone_solid_angles",
 ]

@@ -300,7 +300,7 @@ def sensor_base(spec) -> str | None:
     return spec if spec in PRESET_NAMES else None
 
 
-def uncertainty(name: str) -> dict | None:
+def preset_uncertainty(name: str) -> dict | None:
     """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
     :mod:`nlosplan.sensor_models.uncertainty`, package data ``data/<name>.uncertainty.json``), or None.
 

@@ -14,7 +14,7 @@ Fitted (``nlosplan calibrate --stats`` on the shipped DENALI Table 2 file,
 (``dark_rate_hz``: not SPAD dark counts but external IR, likely the RealSense
 projectors running during every capture), the lights-on extra
 (``ambient_rate_hz``), and the scene parameters of :data:`DENALI_SCENE_FIT`.
-Uncertainties: ``data/denali-tmf8828-3x3.uncertainty.json`` (:func:`.presets.uncertainty`; the sensor
+Uncertainties: ``data/denali-tmf8828-3x3.uncertainty.json`` (:func:`.presets.preset_uncertainty`; the sensor
 fields only, as its contract says; the scene parameters' and nuisances' intervals are
 :data:`DENALI_SCENE_INTERVALS`). The 8x8 preset ships none: its values are the 3x3
 fit's per-iteration rates, not fitted on the 8x8 rows (they are floor noise).

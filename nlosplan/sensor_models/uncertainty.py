@@ -1,7 +1,7 @@
 """The parameter uncertainty of a calibrated sensor: the ``X.uncertainty.json`` beside a sensor file ``X.toml``.
 
 Written by ``nlosplan calibrate`` beside the calibrated sensor it refines
-(or shipped with a preset, :func:`nlosplan.sensor_models.presets.uncertainty`),
+(or shipped with a preset, :func:`nlosplan.sensor_models.presets.preset_uncertainty`),
 read by the design planner's worlds (:mod:`nlosplan.planner.design.worlds`),
 which draw plausible sensors from it. The format::
 
@@ -124,10 +124,10 @@ def uncertainty_for(spec) -> tuple[dict | None, str]:
     """The uncertainty of a sensor given as a preset name or file, and where it came from.
 
     A sensor file ``X.toml`` has the one beside it (``X.uncertainty.json``) if
-    present; a preset has :func:`~nlosplan.sensor_models.presets.uncertainty`'s.
+    present; a preset has :func:`~nlosplan.sensor_models.presets.preset_uncertainty`'s.
     Returns ``(None, reason)`` when there is none.
     """
-    from nlosplan.sensor_models.presets import uncertainty as preset_uncertainty
+    from nlosplan.sensor_models.presets import preset_uncertainty
 
     spec = str(spec)
     if spec.endswith((".toml", ".json")):
