@@ -110,13 +110,17 @@ class Progress:
         """Show the current state (at most one line per ``every`` seconds off a terminal)."""
         self._show()
 
-    def stage(self, name: str, total: int | None = None) -> None:
-        """A new stage of the work; off a terminal its first line is printed at once."""
+    def stage(self, name: str, total: int | None = None, unit: str | None = None) -> None:
+        """A new stage of the work (counting ``unit``, when given); off a terminal its first line is printed at once."""
         if name == self.stage_name:
             return
         self.stage_name = name
         if total is not None:
             self.total = total
+        if unit is not None and unit != self.unit:   # counts of another kind: the old ones do not carry over
+            self.unit, self.done, self.total = unit, 0, total
+            if self._bar is not None:
+                self._bar.unit = unit
         if self._bar is not None:
             self._bar.set_description_str(f"{self.desc}: {name}", refresh=True)
         elif self.enabled:

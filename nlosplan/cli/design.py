@@ -137,7 +137,7 @@ def _cmd_design(args) -> int:
             if stage in ("checkpoint",):
                 bar.note(detail)
                 return
-            bar.stage(stage)
+            bar.stage(stage, unit="reference" if stage.endswith("references") else "evaluation")
             if done is not None:
                 bar.set(done, total, detail)
             else:
