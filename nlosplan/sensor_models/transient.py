@@ -35,6 +35,7 @@ import numpy as np
 from nlosplan._jax import jnp
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import bin_arrivals, pulse_boxes
+from nlosplan.sensor_models.zone_terms import walk_reach_ps
 
 #: Impulse-response support is taken as the pulse shape plus this many Gaussian sigmas.
 IRF_SIGMAS = 9.0
@@ -56,6 +57,20 @@ def irf_extent_ps(sensor: SensorConfig, sigma_ps: float | None = None) -> tuple[
         offsets, width, _ = pulse
         lo, hi = float(offsets.min()), float(offsets.max() + width)
     return lo - IRF_SIGMAS * sigma, hi + IRF_SIGMAS * sigma
+
+
+def move_reach_ps(sensor: SensorConfig, t_abs_ps: float) -> float:
+    """Largest time (ps, either way) by which a sensor's zone clocks and time walk move light at times ``|t| <= t_abs``.
+
+    The sum of the largest zone offset, the largest time scale's drift ``|s - 1|``
+    over ``t_abs`` plus the moves themselves, and :func:`~nlosplan.sensor_models.
+    zone_terms.walk_reach_ps` (0 for a sensor without them).
+    """
+    offsets = sensor.zone_time_offsets_ps
+    scales = sensor.zone_time_scales
+    shift = walk_reach_ps(sensor.time_walk_ps) + (0.0 if offsets is None else float(np.max(np.abs(offsets))))
+    drift = 0.0 if scales is None else float(np.max(np.abs(np.asarray(scales, dtype=float) - 1.0)))
+    return shift + drift * (t_abs_ps + 2.0 * shift)
 
 
 @dataclass(frozen=True)
@@ -97,6 +112,11 @@ class TimeGrid:
     ) -> "TimeGrid":
         """Smallest grid holding every arrival in ``[t_min, t_max]`` that can reach the window.
 
+        With zone clocks or a time walk, the arrivals that their largest move
+        (:func:`move_reach_ps`) can bring into the window are kept, and the grid
+        reaches that far beyond them, so moving nodes loses nothing that reaches the
+        window, and a grid that reaches further (another scene's arrivals) changes nothing.
+
         Parameters
         ----------
         sensor : SensorConfig
@@ -111,11 +131,18 @@ class TimeGrid:
             raise ValueError("oversample must be >= 1")
         lo, hi = irf_extent_ps(sensor, sigma_ps)
         bw, t0 = sensor.bin_width_ps, sensor.start_offset_ps
-        # arrivals earlier than window_start - hi cannot reach the window; later than window_end - lo neither
-        t_first = max(t_min_ps, t0 - hi)
-        t_last = min(t_max_ps, t0 + sensor.window_ps - lo)
+        reach_lo, reach_hi = t0 - hi, t0 + sensor.window_ps - lo
+        s = move_reach_ps(sensor, max(abs(reach_lo), abs(reach_hi)))
+        # arrivals earlier than window_start - hi cannot reach the window, later than window_end - lo neither;
+        # the zones' clocks and the time walk move light by up to s either way after the arrivals are deposited
+        t_first = max(t_min_ps, reach_lo - s)
+        t_last = min(t_max_ps, reach_hi + s)
         if t_last < t_first:  # nothing can reach the window: a one-bin grid keeps shapes valid
             return cls(oversample, 0, 1, sensor.n_bins)
+        # nodes wherever the walk can move that light and it still reaches the window (a grid that reaches
+        # further changes nothing in the window: a pruned object or a longer wall leaves the rest alone)
+        t_first = max(t_first - s, min(t_first, reach_lo))
+        t_last = min(t_last + s, max(t_last, reach_hi))
         first = math.floor((t_first - t0) / bw) - 1
         last = math.floor((t_last - t0) / bw) + 1
         return cls(oversample, first, last - first + 1, sensor.n_bins)
