@@ -164,12 +164,14 @@ def test_verdict_names_the_levels_that_meet_the_target():
 def test_arguments_and_user_errors():
     args = _parser().parse_args([])
     assert args.levels == list(bench.DEFAULT_LEVELS) and args.positions == 100 and args.repeats == 3
-    assert args.plot == "nlosplan-out/bench_simulate.png" and not args.json
+    assert args.plot is None and not args.json  # plots are opt-in
+    assert _parser().parse_args(["--plot"]).plot == "nlosplan-out/bench_simulate.png"
     assert cli_bench.reference_positions_for(100, None) == (0, 21, 47, 73, 99)
     assert cli_bench.reference_positions_for(30, None) == (0, 21)
     assert cli_bench.reference_positions_for(30, [5, 7]) == (5, 7)
     for bad in (["--levels", "reference"], ["--levels", "ultra"], ["--positions", "0"], ["--positions", "101"],
-                ["--reference-positions", "a,b"], ["--repeats", "0"]):
+                ["--reference-positions", "a,b"], ["--reference-positions", "100"], ["--repeats", "0"],
+                ["--objects", "nope"], ["--sizes", "5in"]):
         with pytest.raises(SystemExit):
             _parser().parse_args(bad)
     with pytest.raises(UserError, match="not among the timed positions"):

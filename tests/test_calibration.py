@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from nlosplan.errors import UserError
-from nlosplan.sensor_models import SensorConfig
+from nlosplan.sensor_models import SensorConfig, load_sensor_file
 from nlosplan.calibration import CaptureSet, calibrated_sensor, fit_sensor_model, usable_zones
 from nlosplan.sensor_models.pipeline import expected_histogram
 from nlosplan.simulators import WallScene, wall_arrivals
@@ -84,7 +84,7 @@ def test_calibrated_sensor_round_trips_and_reproduces_the_data(recovered, simula
     s = calibrated_sensor(base, recovered, lights_on=False)
     path = tmp_path / "cal.toml"
     s.save(path)
-    loaded = SensorConfig.load(path)
+    loaded = load_sensor_file(path)
     assert loaded.bin_width_ps == pytest.approx(recovered.values["bin_width_ps"])
     assert loaded.dark_rate_hz * ITERS * loaded.bin_width_ps * 1e-12 == pytest.approx(recovered.values["noise_per_bin"])
     mu = np.asarray(expected_histogram(loaded, simulated.times_ps[5], simulated.weights[5], lights_on=False))

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from nlosplan.cli import main
-from nlosplan.sensor_models import SensorConfig
+from nlosplan.sensor_models import load_sensor_file
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_calibrate_real_data_with_holdout(real, capsys):
     v = result["fit"]["values"]
     assert 91.0 < v["bin_width_ps"] < 94.0  # SENSOR_FACTS: ~91-93 ps measured on this data
     assert all(result["fit"]["errors"][k] is not None for k in ("bin_width_ps", "start_offset_ps", "photon_scale"))
-    s = SensorConfig.load(out)
+    s = load_sensor_file(out)
     assert s.name == "tmf8828-3x3-short-calibrated" and s.bin_width_ps == pytest.approx(v["bin_width_ps"])
     assert (folder / "cal.png").stat().st_size > 10_000
 
@@ -113,14 +113,14 @@ def test_a_file_that_is_neither_json_nor_a_store_is_one_line(tmp_path, capsys):
 def test_score_only_the_shipped_preset_meets_the_targets_on_the_plane_data(real, capsys):
     """The preset was fitted on these captures (in sample): the score path and the preset reproduce the data."""
     data, _ = real
-    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-short", "--json"]) == 0
+    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-plane-unit", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["kind"] == "plane" and [z["zone"] for z in res["zones"]] == list(range(9))
     for z in res["zones"]:
         assert z["n"] >= 65
         assert z["subbin_err_mean"] < 0.08 and z["l1_mean"] < 0.06 and z["l1_max"] < 0.14, z
         assert 0.9 < z["amp_ratio_min"] and z["amp_ratio_max"] < 1.15, z
-    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-short"]) == 0
+    assert main(["calibrate", "--score", str(data), "--sensor", "tmf8828-3x3-plane-unit"]) == 0
     text = capsys.readouterr().out
     assert "targets: sub-bin error met, L1 mean met, L1 max met, amplitude met" in text
 
@@ -130,7 +130,7 @@ def test_score_only_the_shipped_preset_meets_the_targets_on_the_plane_data(real,
     (["CAPTURES", "--score", "DATA", "--sensor", "tmf8828-3x3-short"], "give either CAPTURES"),
     (["--score", "DATA", "--sensor", "tmf8828-3x3-short", "--folds", "3"], "--folds does not apply to --score"),
     (["--score", "DATA", "--sensor", "BAD"], "zone_gains has 2 values but the sensor has 9 zones"),
-    (["--score", "DATA", "--sensor", "EXTRA"], "unknown sensor parameter(s) zone_magic"),
+    (["--score", "DATA", "--sensor", "EXTRA"], "unknown field(s) zone_magic"),
     (["--score", "FOLDER", "--sensor", "tmf8828-3x3-short"], "is a denali folder, which cannot be scored"),
     ([], "give CAPTURES to fit, or --score DATA --sensor FILE"),
 ])
@@ -168,7 +168,6 @@ def test_all_zone_fit_cross_validated_by_distance_meets_the_targets(real, capsys
     v = res["fit"]["values"]
     assert 3.5e6 < v["iterations"] < 5e6  # first-photon pile-up: the firmware's 4000 kilo-iterations
     assert len(v["zone_gains"]) == 9 and res["fit"]["converged"]
-    from nlosplan.sensor_models import SensorConfig
 
-    s = SensorConfig.load(out)
+    s = load_sensor_file(out)
     assert s.pileup and s.zone_time_offsets_ps is not None and "held out by distance" in s.notes

@@ -47,6 +47,9 @@ def test_crlb_json_rms_is_the_rms_of_the_scene_bounds(crlb_json):
     known = [s["rmse_bound_known_m"] for s in d["scenes"]]
     assert d["rms_bound_known_m"] == pytest.approx(math.sqrt(sum(k * k for k in known) / len(known)), rel=1e-9)
     assert all(b >= k * (1 - 1e-9) for b, k in zip(bounds, known))  # estimating nuisances never helps
+    # the bound set beside DENALI's pooled loc_rmse: the 2-D bound with its trace halved under the root
+    assert d["loc_rmse_bound_m"] == pytest.approx(d["rms_bound_m"] / math.sqrt(2), rel=1e-12)
+    assert [s["loc_rmse_bound_m"] for s in d["scenes"]] == pytest.approx([b / math.sqrt(2) for b in bounds])
     assert d["unidentifiable"] == [] and d["fidelity"] == "draft" and d["seconds"] > 0
 
 

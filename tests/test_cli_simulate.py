@@ -24,7 +24,8 @@ def run(capsys, *argv):
 
 
 def outputs(tmp_path, name="h"):
-    return ("--out", str(tmp_path / f"{name}.npy"), "--plot", str(tmp_path / f"{name}.png"))
+    """``--out`` a folder (fixed file names inside) and ``--plot`` (OUT/histograms.png)."""
+    return ("--out", str(tmp_path / name), "--plot")
 
 
 @pytest.fixture(scope="module")
@@ -40,9 +41,9 @@ def denali(tmp_path_factory):
 
 def test_denali_is_the_default_and_writes_every_array(denali):
     assert denali["code"] == 0 and denali["err"] == ""
-    d = denali["dir"]
-    expected, background, signal = (np.load(d / f) for f in ("h.npy", "h_background.npy", "h_signal.npy"))
-    counts, bg_counts = np.load(d / "h_counts.npy"), np.load(d / "h_background_counts.npy")
+    d = denali["dir"] / "h"
+    expected, background, signal = (np.load(d / f) for f in ("expected.npy", "background.npy", "signal.npy"))
+    counts, bg_counts = np.load(d / "counts.npy"), np.load(d / "background_counts.npy")
     for arr in (expected, background, signal):
         assert arr.shape == (3, 3, 128) and arr.dtype == np.float32
     assert counts.shape == bg_counts.shape == (2, 3, 3, 128)
@@ -51,13 +52,15 @@ def test_denali_is_the_default_and_writes_every_array(denali):
     # the object adds light late in the window, never removes any (beyond float32 rounding of the direct peak)
     assert signal.min() >= -4 * np.finfo(np.float32).eps * expected.max() and signal.sum() > 0
     assert signal[..., :64].sum() < 1e-3 * signal.sum()
-    png = d / "h.png"
+    png = d / "histograms.png"
     assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 20_000
+    assert sorted(p.name for p in d.iterdir()) == ["background.npy", "background_counts.npy", "counts.npy",
+                                                   "expected.npy", "histograms.png", "signal.npy"]
 
 
 def test_denali_json_summary(denali):
-    s, d = denali["summary"], denali["dir"]
-    signal, expected = np.load(d / "h_signal.npy"), np.load(d / "h.npy")
+    s, d = denali["summary"], denali["dir"] / "h"
+    signal, expected = np.load(d / "signal.npy"), np.load(d / "expected.npy")
     assert s["scene"]["kind"] == "denali"
     assert (s["scene"]["object"], s["scene"]["size"], s["scene"]["position"]) == ("A", "8in", 19)
     assert s["scene"]["lights"] == "off" and s["scene"]["reflectance"] == "retroreflective"
@@ -76,14 +79,46 @@ def test_denali_json_summary(denali):
 
 
 def test_explain_text_and_no_noisy_captures(capsys, tmp_path, denali):
-    code, out, err = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--explain", "--out", str(tmp_path / "h.npy"),
-                         "--plot", "")
+    code, out, err = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--explain", "--out", str(tmp_path / "h"))
     assert code == 0 and err == ""
     assert "left out" in out and "ambient light" in out and "computed" in out
     assert "signal peak bin per zone" in out and "wrote signal:" in out
-    peaks = np.load(denali["dir"] / "h_signal.npy").argmax(-1)
+    peaks = np.load(denali["dir"] / "h" / "signal.npy").argmax(-1)
     assert " ".join(str(p) for p in peaks[0]) in " ".join(out.split())
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.npy", "h_background.npy", "h_signal.npy"]
+    assert sorted(p.name for p in (tmp_path / "h").iterdir()) == ["background.npy", "expected.npy", "signal.npy"]
+
+
+def test_explain_alone_explains_without_simulating_or_writing(capsys, tmp_path, monkeypatch):
+    """``--explain`` alone (no --out, no --plot): the plan, no simulation, no file (not even the default folder)."""
+    import nlosplan.simulators as simulators
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(simulators, "simulate", lambda *a, **k: pytest.fail("--explain alone must not simulate"))
+    code, out, err = run(capsys, "simulate", *DRAFT, "--explain", "--json")
+    assert code == 0 and err == ""
+    plan = json.loads(out)["plan"]
+    assert any(t["name"] == "object 'A_8in'" for t in plan["computed"]) and plan["paths_per_scene"] > 0
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_deprecated_npy_out_still_writes_beside_it_with_one_warning(capsys, tmp_path):
+    code, out, err = run(capsys, "simulate", "--scene", "wall", "--repeats", "1", "--out", str(tmp_path / "h.npy"))
+    assert code == 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("nlosplan: warning: --out") and "deprecated" in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.npy", "h_counts.npy"]
+
+
+def test_zones_on_a_preset_of_another_zone_mode_warns_what_it_keeps(capsys):
+    code, out, err = run(capsys, "simulate", *DRAFT, "--zones", "8x8", "--explain")
+    assert code == 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("nlosplan: warning: --zones 8x8 changes only the zone grid")
+    from nlosplan.sensor_models import preset
+
+    three = preset("tmf8828-3x3-short")
+    assert f"keeps its 33x32 deg field of view and {three.iterations} iterations" in lines[0]
+    assert "--sensor tmf8828-8x8-short" in lines[0]
 
 
 def test_explain_says_what_the_mixture_and_the_mount_compute(capsys, tmp_path):
@@ -104,10 +139,10 @@ def test_only_zones_gives_those_zones_of_the_full_grid(capsys, tmp_path, denali)
     assert code == 0
     s = json.loads(out)
     assert s["zones"] == [[1, 1], [0, 2]] and s["shape"] == [2, 128] and s["dtype"] == "float64"
-    sub = np.load(tmp_path / "h.npy")
+    sub = np.load(tmp_path / "h" / "expected.npy")
     assert sub.shape == (2, 128) and sub.dtype == np.float64
-    assert np.load(tmp_path / "h_counts.npy").shape == (1, 2, 128)
-    full = np.load(denali["dir"] / "h.npy")
+    assert np.load(tmp_path / "h" / "counts.npy").shape == (1, 2, 128)
+    full = np.load(denali["dir"] / "h" / "expected.npy")
     np.testing.assert_allclose(sub, full[[1, 0], [1, 2]], rtol=2e-4, atol=1e-3)
     assert len(s["signal_peak_bin_per_zone"]) == 2
 
@@ -119,7 +154,7 @@ def test_corner_scene_is_lambertian_by_default(capsys, tmp_path):
     s = json.loads(out)
     assert s["scene"]["kind"] == "corner" and s["scene"]["reflectance"] == "lambertian"
     assert s["scene"]["object"] == "patch" and s["scene"]["object_xy"] == [0.45, 0.30]
-    signal = np.load(tmp_path / "h_signal.npy")
+    signal = np.load(tmp_path / "h" / "signal.npy")
     assert signal.shape == (3, 3, 128) and s["totals"]["signal"] > 0
     # the patch sits to the LiDAR's right (+x): the right-hand zone column sees more of its light
     assert signal[:, 2].sum() > signal[:, 0].sum()
@@ -127,8 +162,7 @@ def test_corner_scene_is_lambertian_by_default(capsys, tmp_path):
 
 def test_object_in_direct_view_warns_in_one_line_and_succeeds(capsys, tmp_path):
     code, out, err = run(capsys, "simulate", "--scene", "corner", "--object-xy", "0,0.2", *DRAFT, "--repeats", "0",
-                         "--json",
-                         "--out", str(tmp_path / "h.npy"), "--plot", "")
+                         "--json", "--out", str(tmp_path / "h"))
     assert code == 0
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("nlosplan: warning:") and "direct field of view" in lines[0]
@@ -140,13 +174,13 @@ def test_wall_scene_writes_what_it_did_before(capsys, tmp_path):
     from nlosplan.sensor_models import preset
     from nlosplan.simulators import WallScene, simulate_wall
 
-    code, out, _ = run(capsys, "simulate", "--scene", "wall", "--repeats", "0", "--json",
-                       "--out", str(tmp_path / "h.npy"), "--plot", "")
+    code, out, _ = run(capsys, "simulate", "--scene", "wall", "--repeats", "0", "--json", "--out", str(tmp_path / "h"))
     assert code == 0
     s = json.loads(out)
-    assert s["scene"]["kind"] == "wall" and s["files"] == {"expected": str(tmp_path / "h.npy")}
-    np.testing.assert_array_equal(np.load(tmp_path / "h.npy"), simulate_wall(WallScene(), preset("tmf8828-3x3-short")))
-    assert not (tmp_path / "h_background.npy").exists()
+    assert s["scene"]["kind"] == "wall" and s["files"] == {"expected": str(tmp_path / "h" / "expected.npy")}
+    np.testing.assert_array_equal(np.load(tmp_path / "h" / "expected.npy"),
+                                  simulate_wall(WallScene(), preset("tmf8828-3x3-short")))
+    assert [p.name for p in (tmp_path / "h").iterdir()] == ["expected.npy"]
 
 
 @pytest.mark.parametrize(
@@ -180,7 +214,7 @@ def test_wall_scene_writes_what_it_did_before(capsys, tmp_path):
     ],
 )
 def test_bad_input_exits_2_with_one_line_naming_it(capsys, argv, names):
-    code, out, err = run(capsys, "simulate", *argv, "--plot", "", "--out", "/nonexistent-dir/never.npy")
+    code, out, err = run(capsys, "simulate", *argv, "--out", "/nonexistent-dir/never")
     assert code == 2 and out == ""
     lines = err.strip().splitlines()
     assert len(lines) == 1, err

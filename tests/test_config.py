@@ -12,6 +12,7 @@ import pytest
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.presets import load_sensor_file, preset
 
 PULSE = (0.0, 1.0, 4.0, 6.0, 3.0, 1.0)  # sums to 15, not normalised
 
@@ -82,8 +83,9 @@ def test_file_round_trip(tmp_path, key, suffix):
     cfg = CONFIGS[key]
     path = tmp_path / f"sensor{suffix}"
     cfg.save(path)
-    _assert_same(SensorConfig.load(path), cfg)
-    _assert_same(SensorConfig.load(str(path)), cfg)
+    _assert_same(load_sensor_file(path), cfg)
+    _assert_same(load_sensor_file(str(path)), cfg)
+    assert not [p for p in tmp_path.iterdir() if p != path]  # written atomically: no temporary file left
 
 
 def test_dict_round_trip_and_types():
@@ -122,16 +124,16 @@ def test_save_and_load_reject_other_suffixes(tmp_path):
         SensorConfig().save(tmp_path / "sensor.yaml")
     (tmp_path / "sensor.txt").write_text("n_bins = 3\n")
     with pytest.raises(UserError, match=r"\.toml or \.json"):
-        SensorConfig.load(tmp_path / "sensor.txt")
+        load_sensor_file(tmp_path / "sensor.txt")
 
 
 def test_load_missing_file_and_bad_syntax(tmp_path):
-    with pytest.raises(UserError, match="cannot read sensor file"):
-        SensorConfig.load(tmp_path / "nope.toml")
+    with pytest.raises(UserError, match="nope.toml does not exist"):
+        load_sensor_file(tmp_path / "nope.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("n_bins = = 3\n")
     with pytest.raises(UserError, match="not valid TOML"):
-        SensorConfig.load(bad)
+        load_sensor_file(bad)
     with pytest.raises(UserError, match="not valid JSON"):
         SensorConfig.from_json("{n_bins: 3")
     with pytest.raises(UserError, match="table/object"):
@@ -287,3 +289,55 @@ def test_derived_quantities():
 def test_notes_do_not_affect_equality():
     assert SensorConfig(notes="a") == SensorConfig(notes="b")
     assert SensorConfig(notes="a").to_dict()["notes"] == "a"
+
+
+# -------------------------------------------------------------- sensor files: base preset or every field
+def test_a_file_names_its_base_preset_or_gives_every_field(tmp_path):
+    """No silent fallback: an empty or partial file without ``base`` is refused, not filled with class defaults."""
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")
+    with pytest.raises(UserError, match="empty.toml: the file is empty; name the preset it refines"):
+        load_sensor_file(empty)
+    partial = tmp_path / "partial.json"
+    partial.write_text('{"n_bins": 64}')
+    with pytest.raises(UserError, match=r"partial.json: the file misses ambient_rate_hz, bin_width_ps"):
+        load_sensor_file(partial)
+    based = tmp_path / "mine.toml"
+    based.write_text('base = "tmf8828-3x3-short"\nn_bins = 64\n')
+    got = load_sensor_file(based)
+    want = preset("tmf8828-3x3-short").replace(n_bins=64, name="mine (tmf8828-3x3-short)")
+    assert got == want and got.name == "mine (tmf8828-3x3-short)" and got.bin_width_ps == want.bin_width_ps
+
+
+@pytest.mark.parametrize("text, words", [
+    ('base = "tmf9999"\n', "base = 'tmf9999' is not a sensor preset"),
+    ('base = 3\n', "base = 3 is not a sensor preset"),
+    ('base = "tmf8828-3x3-short"\njiter_fwhm_ps = 3.0\n', "unknown field(s) jiter_fwhm_ps"),
+    ('base = "tmf8828-3x3-short"\nn_bins = "many"\n', "n_bins='many' must be an integer"),
+    ('base = "tmf8828-3x3-short"\npileup = 1\n', "pileup=1 must be true or false"),
+])
+def test_bad_sensor_file_fields_are_named(tmp_path, text, words):
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(UserError) as exc:
+        load_sensor_file(path)
+    assert str(exc.value).startswith(f"sensor file {path}: ") and words in str(exc.value)
+
+
+def test_binary_and_undecodable_sensor_files_are_one_line(tmp_path):
+    binary = tmp_path / "bin.toml"
+    binary.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(UserError, match="is a binary file, not text"):
+        load_sensor_file(binary)
+    latin = tmp_path / "latin.json"
+    latin.write_bytes('{"name": "caf\xe9"}'.encode("latin-1"))
+    with pytest.raises(UserError, match=r"is not UTF-8 text \(byte 0xe9 at offset 13\)"):
+        load_sensor_file(latin)
+
+
+def test_saved_file_carries_its_base_and_loads_back(tmp_path):
+    cfg = preset("tmf8828-8x8-short").replace(jitter_fwhm_ps=120.0, name="fitted")
+    path = tmp_path / "fitted.toml"
+    cfg.save(path, base="tmf8828-8x8-short")
+    assert path.read_text().startswith('base = "tmf8828-8x8-short"')
+    _assert_same(load_sensor_file(path), cfg)

@@ -120,25 +120,54 @@ def test_pickles_are_refused_unless_trusted(tree, tmp_path):
         assert next(st.iter_captures(position=43, repeat=1)).histogram.min() == 9
 
 
+def _counts(value, dtype=np.float64):
+    a = np.full((1, 3, 3, 128), 5, dtype)
+    a[0, 1, 2, 7] = value
+    return a
+
+
 @pytest.mark.parametrize("content, msg", [
     (b"\x93NUMPY garbage", "042.npy: not a readable .npy file"),
-    ("wrong shape", r"042.npy: histogram shape \(3, 3, 128\), expected \(repeats, 3, 3, 128\)"),
-    ("negative", "042.npy: histogram has negative"),
+    (np.zeros((3, 3, 128), np.int64), r"042.npy: histogram shape \(3, 3, 128\), expected \(repeats, 3, 3, 128\)"),
+    (-np.ones((1, 3, 3, 128), np.int64), r"042.npy: count -1 at index \[0, 0, 0, 0\] is negative \(1152 such"),
+    # a float of 1e30 used to wrap to -9223372036854775808 in int64
+    (_counts(1e30), r"count 1e\+30 at index \[0, 1, 2, 7\] is above the sensor's 24-bit range \(at most 16777215\)"),
+    (_counts(2**24, np.int64), r"count 16777216 at index \[0, 1, 2, 7\] is above the sensor's 24-bit range"),
+    (_counts(2.5), r"count 2.5 at index \[0, 1, 2, 7\] is not a whole number of counts"),
+    (_counts(np.nan), r"count nan at index \[0, 1, 2, 7\] is not a finite number"),
+    (_counts(-np.inf), r"count -inf at index \[0, 1, 2, 7\] is not a finite number"),
+    (np.full((1, 3, 3, 128), True), "dtype bool are not counts"),
 ])
-def test_bad_files_name_the_file(tree, tmp_path, content, msg):
+def test_bad_files_name_the_file_and_nothing_is_imported(tree, tmp_path, content, msg):
     path = tree / "A_4inch_3x3_lightoff_NLOSdata" / "spad_histogram" / "042.npy"
-    if content == "wrong shape":
-        np.save(path, np.zeros((3, 3, 128), np.int64))
-    elif content == "negative":
-        np.save(path, -np.ones((1, 3, 3, 128), np.int64))
+    if isinstance(content, np.ndarray):
+        np.save(path, content)
     else:
         path.write_bytes(content)
-    with CaptureStore(tmp_path / "s.sqlite") as st:
-        with pytest.raises(UserError, match=msg) as e:
-            import_denali(tree, st)
-        assert "\n" not in str(e.value)
+    store = tmp_path / "s.sqlite"
+    with pytest.raises(UserError, match=msg) as e:
+        import_denali(tree, store)
+    assert "\n" not in str(e.value)
+    assert not store.exists()  # checked before the store is created: no partial import
     with pytest.raises(UserError, match="does not exist or is not a folder"):
         import_denali(tmp_path / "nowhere", None)
+
+
+def test_whole_float_counts_within_precision_are_integers(tree, tmp_path):
+    path = tree / "A_4inch_3x3_lightoff_NLOSdata" / "spad_histogram" / "042.npy"
+    np.save(path, _counts(2**24 - 1 + 1e-9))  # float64 rounding of a whole count
+    with CaptureStore(tmp_path / "s.sqlite") as st:
+        import_denali(tree, st)
+        hist = next(st.iter_captures(position=42)).histogram
+    assert hist.dtype == np.int64 and hist[1, 2, 7] == 2**24 - 1 and hist[0, 0, 0] == 5
+
+
+def test_an_empty_import_creates_no_store(tmp_path):
+    (tmp_path / "data" / "README_folder").mkdir(parents=True)
+    store = tmp_path / "s.sqlite"
+    with pytest.raises(UserError, match=r"no capture files to import in .*1 entries skipped, e.g. README_folder"):
+        import_denali(tmp_path / "data", store)
+    assert not store.exists()
 
 
 def _comparable(store):

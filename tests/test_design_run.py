@@ -81,13 +81,9 @@ def test_interrupted_run_resumes_to_the_same_answer(finished, tmp_path):
     class Stop(Exception):
         pass
 
-    seen = []
-
     def stop_after_ten(text, done, total):
-        if done is not None:
-            seen.append(done)
-            if len(seen) == 10:
-                raise Stop
+        if done == 10:  # ten evaluations done (stage lines repeat the count: stop at the first)
+            raise Stop
 
     with pytest.raises(Stop):
         run_design(tiny_config(), tmp_path, workers=1, progress=stop_after_ten)
@@ -247,3 +243,50 @@ def test_mitsuba_twin_reference_agrees_with_the_fast_one():
     assert (twin.crlb_jac == fast.crlb_jac).all()  # the bound's Jacobians stay the fast backend's
     with pytest.raises(Exception, match="unknown simulation backend 'blender'"):
         SceneSet(objects=("A",), backend="blender")
+
+
+def two_seed_config(seed: int) -> DesignConfig:
+    """One zone layout, one axis, 60 draft scenes, MLP only, two worlds: requirements far from their thresholds."""
+    from nlosplan.planner.design.requirements import parse_requirement
+    from nlosplan.planner.design.worlds import WorldsConfig
+
+    fid = {k: dict(v) for k, v in DEFAULT_FIDELITY.items()}
+    fid["bound"]["draws"] = 40
+    fid["trained"].update(epochs=4, bootstrap=50)
+    return DesignConfig(
+        space=DesignSpace(zones=((3, 3),), bin_factors=(1,), axes=("photon_fraction",)),
+        requirements=(parse_requirement("loc<=0.3"), parse_requirement("size>=0.99")),
+        search=SearchConfig(grid_points=3, refine_steps=0, seeds=2, candidates=1, optimize_evals=2, fidelity=fid,
+                            seed=seed, models=("mlp",), max_seeds=4, budget=4),
+        scenes=SceneSet(objects=("A", "S", "circle"), positions=tuple(range(0, 100, 10)), repeats=1,
+                        crlb_objects=("A",), crlb_stride=5, fidelity="draft"),
+        worlds=WorldsConfig(count=2, scene_step=1, candidates=1), label="quick")
+
+
+def test_two_seeds_give_equal_verdicts_and_overlapping_intervals(tmp_path):
+    import shutil
+
+    a = run_design(two_seed_config(0), tmp_path / "a", workers=1)
+    shutil.copytree(tmp_path / "a" / "reference", tmp_path / "b" / "reference")  # the references do not depend on it
+    b = run_design(two_seed_config(1), tmp_path / "b", workers=1)
+    assert a["provenance"]["seed"] == 0 and b["provenance"]["seed"] == 1
+    runs_a = {r["key"] for r in evaluations(tmp_path / "a") if r["evaluator"] == "trained"}
+    runs_b = {r["key"] for r in evaluations(tmp_path / "b") if r["evaluator"] == "trained"}
+    assert runs_a and not runs_a & runs_b  # every run differs: new noise, split and training seed
+    assert [c["verdict"] for c in a["cheapest"]] == [c["verdict"] for c in b["cheapest"]] == ["met", "not met"]
+    for ca, cb in zip(a["cheapest"], b["cheapest"]):
+        if ca["key"] is not None and ca["key"] == cb["key"]:
+            assert ca["lo"] <= cb["hi"] and cb["lo"] <= ca["hi"], (ca, cb)
+    assert [r["verdict"] for r in a["requirements"]] == [r["verdict"] for r in b["requirements"]]
+    for ra, rb in zip(a["requirements"], b["requirements"]):
+        if ra["interval"] and rb["interval"]:
+            assert ra["interval"][0] <= rb["interval"][1] and rb["interval"][0] <= ra["interval"][1]
+    # the met answer held in both runs' worlds (drawn from each run's seed)
+    wa, wb = a["worlds"], b["worlds"]
+    assert wa["worlds"] != wb["worlds"]
+    assert a["cheapest"][0]["worlds"]["met"] == 2 and b["cheapest"][0]["worlds"]["met"] == 2
+    # user units in the JSON: zones as "RxC", bin width in ps, photons as a fraction; the definitions block
+    d = a["cheapest"][0]["design"]
+    assert d["zones"] == "3x3" and d["bin_width_ps"] == pytest.approx(92.816) and 0 < d["photon_fraction"] <= 1
+    assert {r["parameter"] for r in a["requirements"]} == {"photon_fraction"}
+    assert "loc_rmse" in a["metric_definitions"] and a["learners"][0]["chosen"]

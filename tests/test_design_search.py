@@ -67,13 +67,18 @@ def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
     assert p["minimum"] == pytest.approx(0.16, rel=0.25)
     # size: 1 - 0.02 / p >= 0.9 -> p >= 0.2 (jitter 0)
     assert rows[("size", "photon_fraction")]["minimum"] == pytest.approx(0.2, rel=0.25)
-    assert rows[("size", "zones")]["minimum"] == 1.0 and "whole range" in rows[("size", "zones")]["note"]
+    assert rows[("size", "zones")]["minimum"] == "1x1" and "whole range" in rows[("size", "zones")]["note"]
+    # a verdict per row, and feasible says the same as the notes
+    for r in res["requirements"]:
+        assert r["verdict"] in ("met", "not met", "undecided") and r["feasible"] == (r["verdict"] == "met")
+        assert ("pessimistic end" in r["note"]) == (r["verdict"] == "undecided")
     # the loc bound (2x optimistic) screens the fewest photons out: never trained there
     screened = [pt for pt in search.line_points(LOC, "photon_fraction", search.base) if pt["screened"]]
     assert screened and all(pt["trained"] is None for pt in screened)
     assert res["gap"][LOC.name]["value"] == pytest.approx(math.log(2), abs=1e-9)
     cheapest = {c["task"]: c for c in res["cheapest"]}
-    assert cheapest["loc"]["value"] <= 0.05 and cheapest["loc"]["source"] == "scans"
+    assert cheapest["loc"]["value"] <= 0.05 and cheapest["loc"]["source"].startswith("scans (not verified")
+    assert cheapest["loc"]["verdict"] == "met" and cheapest["loc"]["design"]["zones"] in ("1x1", "3x3")
 
     resumed = DesignSearch(SPACE, [LOC, SIZE], cfg, REFS)
     for r in search.results.values():

@@ -20,7 +20,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "nlosplan"
 
 #: Modules below every room: the package face, errors, constants, JAX set-up, the stability catalog's entry type.
-SHARED = ("nlosplan", "nlosplan.errors", "nlosplan.constants", "nlosplan._jax", "nlosplan.cases")
+SHARED = ("nlosplan", "nlosplan.errors", "nlosplan.constants", "nlosplan._jax", "nlosplan.cases", "nlosplan.files",
+          "nlosplan.schema", "nlosplan.progress", "nlosplan.resources")
 #: Rooms, lowest first (``stability`` is the catalog registry, a module above the rooms whose cases it lists).
 ROOMS = ("sensor_models", "denali", "simulators", "stability", "data", "calibration", "tasks", "hardware", "planner",
          "experiments", "reports", "cli")

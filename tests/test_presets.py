@@ -81,11 +81,11 @@ def test_photon_scale_and_background_reproduce_the_data(captures):
     assert MEASURED["n_captures"] == 69
 
 
-def test_only_the_3x3_preset_carries_the_plane_units_per_zone_values():
-    s = preset("tmf8828-3x3-short")
+def test_only_the_plane_unit_preset_carries_the_plane_units_per_zone_values():
+    s = preset("tmf8828-3x3-plane-unit")
     assert s.pileup and s.zone_gains is not None and s.zone_time_offsets_ps is not None
     assert "never take them as facts" in s.notes and "4000 kilo-iterations" in s.notes
     for name in PRESET_NAMES:
-        if name != "tmf8828-3x3-short":
+        if name != "tmf8828-3x3-plane-unit":
             other = preset(name)
             assert other.zone_gains is None and other.zone_time_offsets_ps is None and other.zone_overlap_m is None

@@ -15,7 +15,7 @@ from nlosplan.planner.design.requirements import Condition, Requirement, parse_r
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.protocol import AskTellPlanner
 from nlosplan.sensor_models.impulse import impulse_fwhm_ps, impulse_sigma_ps
-from nlosplan.tasks.metrics import loc_rms_distance, regression_metrics, top1_accuracy
+from nlosplan.tasks.metrics import loc_rms_distance, loc_rmse, regression_metrics, top1_accuracy
 
 
 def _job(condition=None) -> DesignJob:
@@ -80,8 +80,20 @@ def test_loc_rms_distance_is_the_2d_rms_and_sqrt2_times_denalis_pooled_rmse():
     pred = truth + rng.normal(0, 0.02, (50, 2))
     d2 = ((pred - truth) ** 2).sum(axis=1)
     assert loc_rms_distance(pred, truth) == math.sqrt(float(d2.mean()))
-    assert loc_rms_distance(pred, truth) == pytest.approx(math.sqrt(2) * regression_metrics(pred, truth)["rmse"])
+    assert loc_rms_distance(pred, truth) == pytest.approx(math.sqrt(2) * regression_metrics(pred, truth)["loc_rmse"])
     assert loc_rms_distance([[3.0, 4.0]], [[0.0, 0.0]]) == 5.0
+
+
+def test_loc_rmse_pools_x_and_y_as_denali():
+    """DENALI's RMSE: sqrt of the mean over the N x 2 entries (its benchmark/main_table/metrics.py)."""
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(0, 0.3, (40, 2))
+    pred = truth + rng.normal(0, 0.02, (40, 2))
+    assert loc_rmse(pred, truth) == math.sqrt(float(np.mean((pred - truth) ** 2)))
+    assert loc_rmse(pred, truth) == regression_metrics(pred, truth)["loc_rmse"]
+    assert loc_rmse([[3.0, 4.0]], [[0.0, 0.0]]) == pytest.approx(math.sqrt(12.5))  # a 5 m distance: 5 / sqrt(2)
+    with pytest.raises(UserError, match="must both be"):
+        loc_rmse([[1.0, 2.0, 3.0]], [[0.0, 0.0, 0.0]])
 
 
 def test_top1_accuracy():
@@ -114,3 +126,18 @@ def test_sensor_sigma_is_the_impulse_sigma():
 
     s = preset("tmf8828-3x3-short").replace(pulse_fwhm_ps=120.0, jitter_fwhm_ps=90.0)
     assert s.sigma_ps == impulse_sigma_ps(120.0, 90.0) == 150.0 / 2.3548200450309493
+
+
+def test_capture_planner_localizer_scores_with_denalis_loc_rmse():
+    """The capture planner's ensemble (and so rig run's --target-rmse) uses the pooled loc_rmse, not the 2-D RMS."""
+    from nlosplan.planner.capture.ensemble import EnsembleLocalizer
+
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 0.3, (30, 2))
+    hist = np.hstack([xy * 100, rng.uniform(0, 1, (30, 4))]) + 5.0
+    loc = EnsembleLocalizer(hist.mean(axis=0), members=3, seed=0).fit(hist, xy)
+    test_xy = rng.uniform(0, 0.3, (10, 2))
+    test_h = np.hstack([test_xy * 100, rng.uniform(0, 1, (10, 4))]) + 5.0
+    pred = loc.predict(test_h)
+    assert loc.loc_rmse(test_h, test_xy) == pytest.approx(loc_rmse(pred, test_xy), rel=1e-12)
+    assert loc.loc_rmse(test_h, test_xy) == pytest.approx(loc_rms_distance(pred, test_xy) / math.sqrt(2), rel=1e-12)

@@ -70,7 +70,7 @@ def test_rows_cover_every_level_model_task_and_record_the_run(study, ds):
     assert set(zip(overall["jitter_ps"], overall["model"], overall["task"])) == {
         (j, m, t) for j in (0.0, 600.0) for m in ("mlp", "cnn1d") for t in ("loc", "shape", "size")}
     assert not rows.duplicated(["jitter_ps", "model", "task", "metric", "group"]).any()
-    assert {"rmse", "mae", "top1_acc", "top5_acc", "macro_f1", "macro_precision", "macro_recall"} <= set(rows["metric"])
+    assert {"loc_rmse", "mae", "top1_acc", "top5_acc", "macro_f1", "macro_precision", "macro_recall"} <= set(rows["metric"])
     assert len(result["runs"]) == 12 and all(r["status"] == "ok" and r["train_seconds"] > 0 for r in result["runs"])
     assert [lv["jitter_ps"] for lv in result["levels"]] == [0.0, 600.0]
     assert all(lv["n_rows"] == 192 and lv["seconds"] >= lv["train_seconds"] > 0 for lv in result["levels"])
@@ -116,7 +116,7 @@ def test_tables_text_markdown_and_files(study, tmp_path):
     result, _ = study
     table = jitter_table(result)
     assert list(table.index) == [0.0, 600.0] and table.columns.names == ["model", "task", "metric"]
-    assert table.columns[0] == ("mlp", "loc", "rmse") and ("cnn1d", "size", "macro_recall") in table.columns
+    assert table.columns[0] == ("mlp", "loc", "loc_rmse") and ("cnn1d", "size", "macro_recall") in table.columns
     assert not table.isna().any().any()
     value = {(r["jitter_ps"], r["model"], r["task"], r["metric"]): r["value"] for r in result["rows"]
              if r["group"] == "all"}
@@ -130,8 +130,8 @@ def test_tables_text_markdown_and_files(study, tmp_path):
     files = write_jitter(result, tmp_path / "o")
     assert set(files) == {"csv", "markdown", "json", "plot"}
     csv = pd.read_csv(files["csv"], index_col="jitter_ps")
-    assert list(csv.index) == [0.0, 600.0] and csv.loc[0.0, "mlp/loc/rmse"] == pytest.approx(
-        value[(0.0, "mlp", "loc", "rmse")])
+    assert list(csv.index) == [0.0, 600.0] and csv.loc[0.0, "mlp/loc/loc_rmse"] == pytest.approx(
+        value[(0.0, "mlp", "loc", "loc_rmse")])
     assert json.loads(open(files["json"]).read())["config"]["models"] == ["mlp", "cnn1d"]
     from PIL import Image
 

@@ -40,7 +40,7 @@ def test_rows_are_tidy_and_complete(result):
                          "shape": {"all", "near", "far", "4in", "8in"},
                          "size": {"all", "near", "far", "numbers", "letters", "shapes"}}.items():
         assert set(rows.query("task == @task")["group"]) == groups
-    n = rows.query("model == 'mlp' and task == 'loc' and metric == 'rmse'").set_index("group")["n"]
+    n = rows.query("model == 'mlp' and task == 'loc' and metric == 'loc_rmse'").set_index("group")["n"]
     assert n["all"] == 90 == n["4in"] + n["8in"] == n["numbers"] + n["letters"] + n["shapes"]  # 30 % of 300 scenes
     quad = rows.query("model == 'mlp' and task == 'size' and metric == 'top1_acc'").set_index("group")["n"]
     assert 0 < quad["near"] < 45 and 0 < quad["far"] < 45
@@ -49,7 +49,7 @@ def test_rows_are_tidy_and_complete(result):
 
 def test_models_learn_and_times_are_recorded(result):
     value = {(r["model"], r["task"], r["metric"], r["group"]): r["value"] for r in result["rows"]}
-    assert value[("mlp", "loc", "rmse", "all")] < 0.04  # label spread ~0.12 m
+    assert value[("mlp", "loc", "loc_rmse", "all")] < 0.04  # label spread ~0.12 m
     assert value[("mlp", "shape", "top1_acc", "all")] > 0.8  # 6 classes
     assert value[("mlp", "size", "top1_acc", "all")] > 0.9
     runs = pd.DataFrame(result["runs"])
@@ -62,7 +62,7 @@ def test_pivot_to_the_papers_layout(result):
     table = benchmark_table(result)
     assert list(table.index) == ["mlp", "cnn1d"]
     assert table.columns.names == ["task", "metric", "group"]
-    assert table.columns[0] == ("loc", "rmse", "all") and ("size", "macro_recall", "shapes") in table.columns
+    assert table.columns[0] == ("loc", "loc_rmse", "all") and ("size", "macro_recall", "shapes") in table.columns
     assert not table.isna().any().any()
     wide = pd.DataFrame(result["rows"]).pivot_table(index="model", columns=["task", "metric", "group"], values="value")
     assert wide.loc["cnn1d", ("shape", "macro_f1", "near")] == table.loc["cnn1d", ("shape", "macro_f1", "near")]
@@ -77,7 +77,7 @@ def test_text_markdown_and_files(result, tmp_path):
     assert md.startswith("# DENALI benchmark") and "| model | RMSE | MAE |" in md and "## Training runs" in md
     files = write_benchmark(result, tmp_path / "out")
     csv = pd.read_csv(files["csv"], index_col="model")
-    assert list(csv.index) == ["mlp", "cnn1d"] and "loc/rmse/all" in csv.columns and "shape/train_seconds" in csv
+    assert list(csv.index) == ["mlp", "cnn1d"] and "loc/loc_rmse/all" in csv.columns and "shape/train_seconds" in csv
     assert json.loads(open(files["json"]).read())["config"]["models"] == ["mlp", "cnn1d"]
 
 

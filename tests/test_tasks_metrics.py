@@ -44,7 +44,7 @@ def test_regression_pools_both_coordinates():
     m = regression_metrics(pred, true)
     # errors 0, -0.2, -0.1, 0 over 4 entries
     assert m["mse"] == pytest.approx((0.04 + 0.01) / 4)
-    assert m["rmse"] == pytest.approx(np.sqrt(0.05 / 4))
+    assert m["loc_rmse"] == pytest.approx(np.sqrt(0.05 / 4))
     assert m["mae"] == pytest.approx(0.3 / 4)
     assert m["x_mae"] == pytest.approx(0.05) and m["y_mae"] == pytest.approx(0.1)
     with pytest.raises(UserError, match=r"must both be \(N, 2\)"):
@@ -80,7 +80,7 @@ def test_breakdown_groups_and_counts(task):
     assert set(rows["metric"]) == set(METRICS[task])
     # a group's value is the metric over its rows alone
     sel = lab["size"].to_numpy() == "8in"
-    key = "rmse" if task == "loc" else "top1_acc"
+    key = "loc_rmse" if task == "loc" else "top1_acc"
     grp = "size" if task != "size" else "class_group"
     if grp == "size":
         want = (regression_metrics(scores[sel], targets[sel]) if task == "loc"

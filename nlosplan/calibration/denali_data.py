@@ -44,7 +44,7 @@ import numpy as np
 
 from nlosplan.calibration.model import CaptureSet
 from nlosplan.constants import C_M_PER_PS
-from nlosplan.data.denali_io import import_denali
+from nlosplan.data.denali_io import NoCaptureFiles, import_denali
 from nlosplan.data.records import describe
 from nlosplan.data.store import CaptureStore
 from nlosplan.denali import DENALI_OBJECTS
@@ -174,19 +174,20 @@ def load_denali_captures(path, where: dict | None = None, *, positions_json=None
     """
     path = Path(path)
     if path.is_dir():
+        if path.name.endswith("_NLOSdata"):
+            raise UserError(f"{path} is not a DENALI-layout folder: no <object>_<4inch|8inch>_<RxC>_<lighton|lightoff>"
+                            f"_NLOSdata/spad_histogram/NNN.npy in it (give the folder that holds {path.name}, not "
+                            "the capture folder itself)")
         with tempfile.TemporaryDirectory(prefix="nlosplan-calibrate-") as tmp:
             with CaptureStore(Path(tmp) / "captures.sqlite", synchronous="NORMAL") as st:
-                summary = import_denali(path, st, positions_json=positions_json, trust_pickle=trust_pickle)
-                if summary["files"] == 0:
-                    why = "; ".join(f"{s['path']}: {s['reason']}" for s in summary["skipped"][:2]) or "it is empty"
-                    if path.name.endswith("_NLOSdata"):
-                        why = f"give the folder that holds {path.name}, not the capture folder itself"
-                    raise UserError(f"{path} is not a DENALI-layout folder: no <object>_<4inch|8inch>_<RxC>_"
-                                    f"<lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy in it ({why})")
+                try:
+                    import_denali(path, st, positions_json=positions_json, trust_pickle=trust_pickle)
+                except NoCaptureFiles as exc:
+                    raise UserError(f"{path} is not a DENALI-layout folder: {exc}") from None
                 return _from_store(st, where, str(path))
     if path.exists() and not is_capture_store(path):
         raise UserError(f"{path} is neither a DENALI-layout folder nor a capture store (.sqlite)")
-    with CaptureStore(path, create=False) as st:
+    with CaptureStore(path, readonly=True) as st:
         return _from_store(st, where, str(path))
 
 

@@ -58,8 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
         func = getattr(args, "func", None)
         if func is None:
-            parser.print_help(sys.stderr)
-            return EXIT_USAGE
+            raise UserError(f"give a command: {', '.join(ROOMS)} (see 'nlosplan --help')")
         return int(func(args) or 0)
     except UserError as exc:
         print(f"nlosplan: error: {exc}", file=sys.stderr)

@@ -2,59 +2,54 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from contextlib import contextmanager
 
-from nlosplan.cli.common import emit, names_type, note, number_type, parse_where, progress_bar, sub_parser
+from nlosplan.cli.common import emit, names_type, note, number_type, parse_where, progress_bar, seed_type, sub_parser
 from nlosplan.tasks.names import (DEFAULT_EPOCHS, DEFAULT_PATIENCE, DEFAULT_WIDTH, MODEL_NAMES, PROFILES, SMALL,
                                   SPLITS, TASKS)
 
 DEFAULT_OUT = "nlosplan-out/benchmark"
 
 def _load_dataset(store: str, where: dict):
-    """The captures of ``store`` that match ``where`` (a :class:`~nlosplan.data.dataset.Dataset`)."""
-    from nlosplan.data.store import CaptureStore
+    """The captures of ``store`` that match ``where`` (a :class:`~nlosplan.data.dataset.Dataset`); read-only."""
+    from nlosplan.data.load import load_dataset
 
-    with CaptureStore(store, create=False) as st:
-        return st.load(**where)
-
-
-def _log_line(event: dict) -> None:
-    """Progress for a log file: one stderr line per finished entry (stdout stays clean for --json)."""
-    if event["event"] == "start":
-        _log_line.t0 = time.perf_counter()
-    elif event["event"] == "done":
-        t0, _log_line.t0 = getattr(_log_line, "t0", None), None
-        took = " (n/a)" if t0 is None else f" in {time.perf_counter() - t0:.0f} s"
-        print(f"benchmark: [{event['index'] + 1}/{event['total']}] {event['model']} {event['task']}{took}",
-              file=sys.stderr, flush=True)
+    return load_dataset(store, where)
 
 
 @contextmanager
 def _progress(args, n_entries: int):
-    """Progress on stderr: a tqdm bar over the (model, task) entries on a terminal, else one line per entry."""
-    if not sys.stderr.isatty():
-        yield _log_line
-        return
+    """Progress over the (model, task) entries on stderr: a tqdm bar on a terminal, else a line every few seconds
+    (the current model, task and epoch) and one per finished entry."""
     with progress_bar(args, n_entries, "benchmark", "model") as bar:
+        started: dict = {}
+
         def update(event: dict) -> None:
-            if event["event"] == "epoch":
+            kind = event["event"]
+            if kind == "start":
+                started[(event["model"], event["task"])] = time.perf_counter()
+                bar.set_postfix_str(f"{event['model']} {event['task']}")
+            elif kind == "epoch":
                 rec = event["record"]
                 val = "" if rec["val_loss"] is None else f" val {rec['val_loss']:.3g}"
                 bar.set_postfix_str(f"{event['model']} {event['task']} epoch {rec['epoch']}{val}")
-            elif event["event"] == "done":
-                bar.update(1)
+            elif kind == "done":
+                t0 = started.pop((event["model"], event["task"]), None)
+                took = "" if t0 is None else f" in {time.perf_counter() - t0:.0f} s"
+                bar.update(1, f"{event['model']} {event['task']} done{took}")
 
-        yield None if bar is None else update
+        yield update
 
 
 def _cmd_benchmark(args) -> int:
     import torch
 
+    from nlosplan.files import WriteFailed, check_output_dir
     from nlosplan.reports.benchmark_table import benchmark_text, write_benchmark
     from nlosplan.tasks.benchmark import run_benchmark
 
+    check_output_dir(args.out)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     where = parse_where(args.where)
@@ -66,7 +61,12 @@ def _cmd_benchmark(args) -> int:
                                **training_options(args))
     result["config"]["store"] = str(args.store)
     result["config"]["where"] = where
-    files = write_benchmark(result, args.out)
+    try:
+        files = write_benchmark(result, args.out)
+    except WriteFailed as exc:  # keep the work: print the table, then say what was not written
+        emit(args, result, benchmark_text(result))
+        raise WriteFailed(f"{exc}; the table is printed above, no file was left partial; free some space or choose "
+                          "another --out and rerun") from None
     result["files"] = files
     emit(args, result, benchmark_text(result) + "\n\n" + "\n".join(f"wrote {k}: {v}" for k, v in files.items()))
     return 0
@@ -76,7 +76,9 @@ BENCHMARK_DESCRIPTION = f"""\
 Train and test the DENALI benchmark models (MLP, 1D CNN, 3D CNN, Transformer)
 on its three tasks (localization, 30-way shape, 4 in vs 8 in size) and print
 the paper's table: models as rows; per task the metrics overall and by size,
-class group (numbers, letters, shapes) and near/far quadrant.
+class group (numbers, letters, shapes) and near/far quadrant. Localization
+RMSE (loc_rmse) is DENALI's: sqrt of the mean of the squared x and y errors
+pooled over the N x 2 entries (not the 2-D distance, which is sqrt 2 larger).
 
 Data: the captures of --store that match --where, each scene's repeats
 averaged (as DENALI). Split: 70/30 random (stratified for classification,
@@ -134,7 +136,8 @@ def add(sub) -> None:
                    help=f"tasks (default: {','.join(TASKS)})")
     p.add_argument("--split", choices=SPLITS, default="random", help="train/test split (default: random)")
     add_training_options(p)
-    p.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
+    p.add_argument("--seed", type=seed_type(), default=42, help="seed of the split and training, 0 to 2**32-1 "
+                                                                "(default: 42)")
     p.add_argument("--threads", type=number_type(int), metavar="N", help="torch CPU threads (default: torch's)")
     p.add_argument("--save-models", action="store_true", help="also write each model's checkpoint to OUT/models/{model}_{task}.pt")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from nlosplan.cli.calibrate_plane import zone_list
-from nlosplan.cli.common import emit, int_type, note, progress_bar
+from nlosplan.cli.common import emit, int_type, note, number_type, progress_bar, seed_type
 from nlosplan.errors import UserError
 
 EXAMPLES = (
@@ -108,8 +108,10 @@ def _bootstrap(args, cal):
 def _write(args, cal) -> dict:
     """The calibrated sensor file (--out) and the residual plot (--plot), as {kind: path}."""
     files = {}
-    if args.out:
-        cal.sensor.save(args.out)
+    if args.out:  # written atomically, naming the preset it refines (base) when there is one
+        from nlosplan.sensor_models import sensor_base
+
+        cal.sensor.save(args.out, base=sensor_base(args.sensor))
         files["sensor"] = str(args.out)
     if args.plot:
         from nlosplan.reports.calibration_plot import plot_calibration
@@ -154,6 +156,12 @@ def _cmd_calibrate(args) -> int:
     t0 = time.perf_counter()
     if args.score:
         return calibrate_plane.run_score(args, t0)
+    from nlosplan.files import check_output_file, check_plot_path
+
+    if args.out:  # before the fit (minutes), not after it
+        check_output_file(args.out, "--out", suffixes=(".toml", ".json"))
+    if args.plot:
+        check_plot_path(args.plot)
     if not args.captures:
         raise UserError("give CAPTURES to fit, or --score DATA --sensor FILE to score a sensor without fitting")
     if 0 < args.bootstrap < MIN_RESAMPLES:  # before the fit, not after it
@@ -295,14 +303,14 @@ def add(sub) -> None:
     p.add_argument("--zones", help="flat zone indices to fit, e.g. 4 (centre of 3x3) or 0,1,2,3,4 "
                                    "(default: every zone for JSON with --model zones, 4 with --model global; every "
                                    "zone that sees the relay wall for DENALI)")
-    p.add_argument("--min-distance", type=float,
+    p.add_argument("--min-distance", type=number_type(float, zero_ok=True),
                    help="JSON only: leave out captures closer than this, metres, from the fit and the scores "
                         "(default: 0.06)")
     p.add_argument("--start", metavar="NAME=V,...", help="start values, e.g. bin_width_ps=95,start_offset_ps=-1100 "
                                                         "(default: from leading edges and sums of the data)")
     p.add_argument("--holdout", type=float, default=0.0,
                    help="fraction of captures kept out of the fit and scored (default: 0, fit on all)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the holdout split and the bootstrap (default: 0)")
+    p.add_argument("--seed", type=seed_type(), default=0, help="seed of the holdout split and the bootstrap (default: 0)")
     p.add_argument("--bootstrap", type=int_type(0, 1000), default=0, metavar="N",
                    help="also refit on N resamples of the fitted captures (with replacement) and report the spread: "
                         "uncertainties that include model error, unlike Fisher's; 1-4 s per refit (default: off)")

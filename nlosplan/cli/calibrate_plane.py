@@ -106,7 +106,9 @@ def run_zones(args, t0: float) -> int:
     sensor = sensor.replace(notes=f"{base.notes} {notes}")
     files = {}
     if args.out:
-        sensor.save(args.out)
+        from nlosplan.sensor_models import sensor_base
+
+        sensor.save(args.out, base=sensor_base(args.sensor or "tmf8828-3x3-short"))
         files["sensor"] = str(args.out)
     if args.plot:
         from nlosplan.reports.calibration_plot import plot_calibration

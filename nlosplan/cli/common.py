@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from contextlib import contextmanager
 from typing import Callable
 
 from nlosplan.errors import UserError
+from nlosplan.progress import Progress
+from nlosplan.resources import MAX_SEED
 
 EXIT_USAGE = 2
 _INT_COLUMNS = ("position", "repeat")  # --where columns that take integers
@@ -27,19 +30,46 @@ def names_type(kind: str, allowed) -> Callable[[str], list[str]]:
     return parse
 
 
-def number_type(cast, *, zero_ok: bool = False) -> Callable[[str], float]:
-    """An argparse type: a number > 0 (>= 0 with ``zero_ok``)."""
+def number_type(cast, *, zero_ok: bool = False, hi: float | None = None) -> Callable[[str], float]:
+    """An argparse type: a finite number > 0 (>= 0 with ``zero_ok``; at most ``hi`` when given)."""
 
     def parse(text: str):
         try:
             value = cast(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if cast is int else 'a number'}") from None
-        if not (value >= 0 if zero_ok else value > 0) or value != value:
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+        if not (value >= 0 if zero_ok else value > 0):
             raise argparse.ArgumentTypeError(f"{text} must be {'>= 0' if zero_ok else '> 0'}")
+        if hi is not None and value > hi:
+            raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: up to {hi:g}")
         return value
 
     return parse
+
+
+def seed_type():
+    """An argparse type: a random seed, 0 to :data:`~nlosplan.resources.MAX_SEED` (what every generator takes)."""
+    return int_type(0, MAX_SEED)
+
+
+def zones_type(text: str) -> tuple[int, int]:
+    """An argparse type: a zone grid ``RxC`` (e.g. 3x3 or 8x8), 1 to 16 per axis."""
+    from nlosplan.sensor_models.config import MAX_ZONES_PER_AXIS
+
+    try:
+        rows, cols = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} must look like 3x3 or 8x8 (rows x columns)") from None
+    if not (1 <= rows <= MAX_ZONES_PER_AXIS and 1 <= cols <= MAX_ZONES_PER_AXIS):
+        raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: 1 to {MAX_ZONES_PER_AXIS} zones per axis")
+    return rows, cols
+
+
+def warn(message: str) -> None:
+    """One ``nlosplan: warning: ...`` line on stderr (also with --json: stdout stays the result)."""
+    print(f"nlosplan: warning: {message}", file=sys.stderr, flush=True)
 
 
 def int_type(lo: int, hi: int | None = None):
@@ -99,6 +129,7 @@ EXAMPLES = {
         "nlosplan design                                   # the main job: DENALI preset, ~15 min on 2 cores",
         "nlosplan design --quick --json                    # reduced space, ~2 min",
         "nlosplan design --requirement 'loc<=0.03' --requirement 'size>=0.95@size=4in' --out out/d --resume",
+        "nlosplan design --quick --out out/d --overwrite        # start over where out/d holds a previous run",
         "nlosplan design --config my_space.toml --cluster local:4",
     ),
     "serve": (
@@ -110,11 +141,11 @@ EXAMPLES = {
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",
     "sensor fit-timebase": "nlosplan sensor fit-timebase ../shared/data/tmf882x_distance/distance_data_even.json",
     "simulate": (
-        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19.npy --plot out/a19.png",
+        "nlosplan simulate --object A --size 8in --position 19 --lights off --out out/a19 --plot",
         "nlosplan simulate --scene corner --object-xy 0.45,0.30 --object A_8in --reflectance retroreflective "
         "--zones 8x8 --explain",
         "nlosplan simulate --scene wall --sensor tmf8828-8x8-short --distance 0.6 --yaw 20 --jitter-ps 100 "
-        "--out out/h.npy --plot out/h.png",
+        "--out out/wall --plot out/wall.png",
     ),
     "check": "nlosplan check --json",
     "bench histogram": "nlosplan bench histogram --json",
@@ -179,28 +210,22 @@ def sub_parser(subparsers, name: str, key: str, help_text: str, description: str
 def command_group(sub, name: str, help_text: str, description: str, metavar: str = "SUBCOMMAND"):
     """A subcommand that holds subcommands (``nlosplan NAME SUB ...``); returns the holder for :func:`sub_parser`."""
     group = sub.add_parser(name, help=help_text, description=description)
+    holder = group.add_subparsers(dest=f"{name}_command", metavar=metavar, parser_class=Parser)
 
-    def usage(args) -> int:  # `nlosplan NAME` alone: this group's help, not the whole command's
-        group.print_help(sys.stderr)
-        return EXIT_USAGE
+    def usage(args) -> int:  # `nlosplan NAME` alone: one line naming the subcommands (help with --help)
+        raise UserError(f"nlosplan {name}: give a {metavar.lower()}: {', '.join(holder.choices)} "
+                        f"(see 'nlosplan {name} --help')")
 
     group.set_defaults(func=usage)
-    return group.add_subparsers(dest=f"{name}_command", metavar=metavar, parser_class=Parser)
+    return holder
 
 
 @contextmanager
-def progress_bar(args, total: int, desc: str, unit: str):
-    """A tqdm bar on stderr for a person at a terminal (not with --json), closed on exit; None otherwise."""
-    if getattr(args, "json", False) or not sys.stderr.isatty():
-        yield None
-        return
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False, dynamic_ncols=True)
-    try:
+def progress_bar(args, total: int | None, desc: str, unit: str):
+    """Progress of long work on stderr (:class:`nlosplan.progress.Progress`): a tqdm bar on a terminal, a line
+    every few seconds otherwise, also with --json; nothing with --quiet. Closed on exit."""
+    with Progress(desc, total, unit, enabled=not getattr(args, "quiet", False)) as bar:
         yield bar
-    finally:
-        bar.close()
 
 
 def note(args, message: str) -> None:

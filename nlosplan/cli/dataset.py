@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from contextlib import contextmanager
 
-from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, sub_parser
-
+from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, seed_type, sub_parser
+from nlosplan.errors import UserError
 
 
 # ----------------------------------------------------------------- option values
@@ -73,37 +73,69 @@ def _fidelity(text: str) -> str:
 
 @contextmanager
 def _progress(args, desc: str, unit: str):
-    """A ``progress(done, total, text)`` callback drawing a tqdm bar on a terminal (None otherwise)."""
-    with progress_bar(args, 0, desc, unit) as bar:
-        def update(done: int, total: int, text: str) -> None:
-            bar.total, bar.n = total, done
-            bar.set_postfix_str(text[:50], refresh=False)
-            bar.refresh()
-
-        yield None if bar is None else update
+    """A ``progress(done, total, text)`` callback showing progress on stderr (tqdm on a terminal, lines otherwise)."""
+    with progress_bar(args, None, desc, unit) as bar:
+        yield lambda done, total, text: bar.set(done, total, text)
 
 
 def _store(args, *, create: bool, synchronous: str = "FULL"):
+    """The store of ``--store``: opened read-only unless the command writes (``create``)."""
     from nlosplan.data.store import CaptureStore
 
-    return CaptureStore(args.store, create=create, synchronous=synchronous)
+    if create:
+        return CaptureStore(args.store, create=True, synchronous=synchronous)
+    return CaptureStore(args.store, readonly=True)
+
+
+def _check_store_target(path) -> None:
+    """``--store`` of a command that writes: a file path in a writable folder, before any work."""
+    from pathlib import Path
+
+    from nlosplan.files import check_output_file
+
+    if Path(path).is_dir():
+        raise UserError(f"--store {path} is a folder; give a file path such as {Path(path) / 'captures.sqlite'}")
+    check_output_file(path, "--store")
+
+
+#: Bytes per stored capture beyond its histogram (labels, key, metadata, index), measured on SQLite stores.
+_ROW_OVERHEAD_BYTES = 600
+
+
+def _check_build_size(args, sensor) -> None:
+    """Refuse a build the disk or the memory cannot hold, before any work (one line)."""
+    from nlosplan.files import check_free_space
+    from nlosplan.resources import check_memory
+
+    cells = sensor.n_zones * sensor.n_bins
+    scenes = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights)
+    check_free_space(args.store, scenes * args.repeats * (8 * cells + _ROW_OVERHEAD_BYTES), "--store")
+    # one batch of Poisson captures: int64 counts and JAX's float32 rates, keys and draws (~4 copies), plus the
+    # simulator's own working set
+    per_batch = min(args.batch, len(args.positions)) * args.repeats * cells * 8 * 4
+    check_memory(per_batch + 1.5e9, f"--repeats {args.repeats} --batch {args.batch}",
+                 "use fewer --repeats or a smaller --batch")
 
 
 # ----------------------------------------------------------------- commands
 def _cmd_build(args) -> int:
     from nlosplan.cli.simulate import _with_warning_lines
-    from nlosplan.sensor_models import resolve_sensor
     from nlosplan.data.build import build_dataset
+    from nlosplan.files import writing
+    from nlosplan.sensor_models import resolve_sensor
 
     sensor = resolve_sensor(args.sensor)
-    with _store(args, create=True, synchronous="FULL" if args.fsync else "NORMAL") as store:
-        n = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights) * args.repeats
-        note(args, f"building up to {n} captures into {args.store} ...")
-        with _progress(args, "dataset build", "capture") as progress:
-            res, warned = _with_warning_lines(
-                build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
-                positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
-                seed=args.seed, reflectance=args.reflectance, batch=args.batch, progress=progress)
+    _check_store_target(args.store)
+    _check_build_size(args, sensor)
+    n = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights) * args.repeats
+    note(args, f"building up to {n} captures into {args.store} ...")
+    with writing(cont="free some space and rerun the same command: it resumes where it stopped"), \
+            _store(args, create=True, synchronous="FULL" if args.fsync else "NORMAL") as store, \
+            _progress(args, "dataset build", "capture") as progress:
+        res, warned = _with_warning_lines(
+            build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
+            positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
+            seed=args.seed, reflectance=args.reflectance, batch=args.batch, progress=progress)
     res["warnings"] = warned
     text = (f"stored {res['captures_added']} new captures in {res['store']} ({res['captures_skipped']} of "
             f"{res['captures_total']} were there already; {res['groups_skipped']} of {res['groups']} groups "
@@ -124,12 +156,15 @@ def _skipped_lines(skipped: list[dict], limit: int = 20) -> list[str]:
 
 
 def _cmd_import(args) -> int:
-    from nlosplan.sensor_models import resolve_sensor
     from nlosplan.data.denali_io import import_denali
+    from nlosplan.files import writing
+    from nlosplan.sensor_models import resolve_sensor
 
     sensors = [resolve_sensor(s) for s in args.sensor or ()]
-    with _store(args, create=True) as store, _progress(args, "import DENALI", "file") as progress:
-        res = import_denali(args.root, store, positions_json=args.positions_json, trust_pickle=args.trust_pickle,
+    _check_store_target(args.store)
+    with writing(cont="free some space and rerun the same command: captures stored already are skipped"), \
+            _progress(args, "import DENALI", "file") as progress:
+        res = import_denali(args.root, args.store, positions_json=args.positions_json, trust_pickle=args.trust_pickle,
                             sensors=sensors, progress=progress)
     text = "\n".join([f"imported {res['captures_added']} captures from {res['files']} files in {res['folders']} "
                       "folders "
@@ -148,8 +183,12 @@ def _where(args) -> dict:
 
 def _cmd_export(args) -> int:
     from nlosplan.data.denali_io import export_denali
+    from nlosplan.files import check_output_dir, writing
 
-    with _store(args, create=False) as store, _progress(args, "export DENALI", "file") as progress:
+    check_output_dir(args.out)
+    with _store(args, create=False) as store, _progress(args, "export DENALI", "file") as progress, \
+            writing(kept="the files written before are complete", cont="free some space and rerun the same command "
+                                                                      "(equal files are left alone)"):
         res = export_denali(store, args.out, overwrite=args.overwrite, progress=progress, **_where(args))
     emit(args, res, f"wrote {res['files_written']} files ({res['files_unchanged']} unchanged) in {res['folders']} "
                     f"folders, {res['captures']} captures at {res['positions']} positions, to {res['root']}")
@@ -206,7 +245,7 @@ def _filters(p: argparse.ArgumentParser) -> None:
     g.add_argument("--positions", type=_positions, metavar="0-99", help="gantry positions, e.g. 0-99 or 0,5,9")
     g.add_argument("--source", metavar="NAME", help="capture source, e.g. real:denali or sim:fast")
     g.add_argument("--sensor-hash", metavar="HASH", help="one stored sensor (see 'nlosplan dataset info')")
-    g.add_argument("--seed", type=int, help="build seed of simulated captures")
+    g.add_argument("--seed", type=seed_type(), help="build seed of simulated captures")
 
 
 def add(sub) -> None:
@@ -235,7 +274,7 @@ def add(sub) -> None:
                    help="simulator level: draft, low, default, high, reference (default: default)")
     b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
                    help="object reflectance (default: retroreflective)")
-    b.add_argument("--seed", type=int_type(0), default=0, help="build seed (default: 0)")
+    b.add_argument("--seed", type=seed_type(), default=0, help="build seed, 0 to 2**32-1 (default: 0)")
     b.add_argument("--batch", type=int_type(1), default=100, help="scenes per simulator call (default: 100); keep it when resuming "
                                                                    "(it fixes the float32 rounding of the means)")
     b.add_argument("--fsync", action="store_true",

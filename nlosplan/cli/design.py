@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 
 from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
+
+MAX_SEED = 1_000_000  # nlosplan.planner.design.search.MAX_SEED (not imported: --help stays light)
 
 DEFAULT_OUT = "nlosplan-out/design"
 
@@ -19,20 +19,39 @@ With no options: the DENALI preset (tmf8828-3x3-short as the reference), the thr
 tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
 size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
 32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 15 minutes on
-2 cores; --quick runs a reduced space in about 2 minutes.
+2 cores; --quick runs a reduced space in about 3 minutes.
+
+Metrics: loc_rmse is DENALI's localization RMSE, metres: sqrt of the mean of the squared
+x and y errors pooled over the N x 2 entries (loc<=X means loc_rmse <= X); top1_acc is
+the top-1 accuracy of the shape or size class.
 
 How: designs are emulated from simulated references (one per zone layout) by degrading
 histograms (jitter, bin merging, truncation, photon scaling). Fast bounds (Cramer-Rao
-bound, ideal observer) screen the space; DENALI's MLP trained on captures of a design
-verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout and bin
-width with the bound corrected by the measured bound-to-trained gap; the cheapest
-candidates are verified over several seeds. With --real, the trained evaluator uses real
-captures from a store instead (designs finer than the captures are reported unreachable).
+bound, ideal observer) screen the space; the best learner of each task (--models, MLP
+and 1D CNN by default, compared on the reference design) trained on captures of a
+design verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout
+and bin width with the bound corrected by the measured bound-to-trained gap.
+
+Verdicts are met (the pessimistic end of the 95 % interval meets the requirement), not
+met (even the optimistic end fails) or undecided (it straddles). A run of a design at
+a seed draws new Poisson noise, a new train/test split and a new training seed; the
+interval of a design is that of its mean over its runs, so two runs with different
+--seed give the same verdicts within their intervals. Undecided candidates get more
+seeds until decided or the budget is spent. The cheapest met candidates are then
+checked in --worlds plausible worlds (object albedo, background, photon scale, extra
+jitter, and a calibration's parameter uncertainty when the sensor has one): the
+minimum hardware is the cheapest design met in at least 90 % of them. With --real,
+the trained evaluator uses real captures from a store instead (designs finer than the
+captures are reported unreachable; no worlds).
 
 Output (OUT): report.html (self-contained), report.md, PNG plots, result.json,
-design_checkpoint.json (every evaluation; --resume continues from it).
-JSON: {"requirements": [{"task", "parameter", "minimum" or "maximum", "interval",
-"feasible"}...], "cheapest": [...], "report": PATH}."""
+design_checkpoint.json and design_evaluations.jsonl (every evaluation; --resume
+continues from them; a rerun into a folder with a previous run needs --resume or
+--overwrite). Progress goes to stderr, also with --json.
+JSON: {"cheapest": [{"requirement", "verdict", "design", "value", "lo", "hi",
+"worlds"}...], "requirements": [{"task", "parameter", "minimum" or "maximum",
+"interval", "verdict", "feasible"}...], "learners": [...], "metric_definitions": {...},
+"report": PATH}."""
 
 
 def _requirement(text: str):
@@ -53,6 +72,16 @@ def _cluster(text: str) -> str:
     raise argparse.ArgumentTypeError(f"{text!r}: give tcp://HOST:PORT (a running Dask scheduler) or local:N (N >= 1)")
 
 
+def _models(text: str) -> tuple[str, ...]:
+    """``mlp,cnn1d`` -> the candidate learners (checked before any work starts)."""
+    from nlosplan.tasks.names import MODEL_NAMES, check_names
+
+    try:
+        return tuple(check_names("model(s)", [m.strip() for m in text.split(",") if m.strip()], MODEL_NAMES))
+    except UserError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_config(args):
     """The :class:`DesignConfig` of the parsed options."""
     from dataclasses import replace
@@ -67,7 +96,17 @@ def build_config(args):
     if args.backend != "fast":
         cfg = replace(cfg, scenes=replace(cfg.scenes, backend=args.backend))
     if args.seeds is not None:
-        cfg = replace(cfg, search=replace(cfg.search, seeds=args.seeds))
+        cfg = replace(cfg, search=replace(cfg.search, seeds=args.seeds,
+                                          max_seeds=max(cfg.search.max_seeds, args.seeds)))
+    if args.seed is not None:
+        cfg = replace(cfg, search=replace(cfg.search, seed=args.seed))
+    if args.models is not None:
+        cfg = replace(cfg, search=replace(cfg.search, models=args.models))
+    if args.worlds is not None:
+        cfg = replace(cfg, worlds=replace(cfg.worlds, count=args.worlds))
+    for flag, value in (("--where", args.where), ("--capture-sensor", args.capture_sensor)):
+        if value is not None and not args.real:
+            raise UserError(f"{flag} applies only with --real STORE (the real captures it describes)")
     if args.real:
         where = None
         if args.where:
@@ -81,41 +120,47 @@ def build_config(args):
 def _cmd_design(args) -> int:
     from pathlib import Path
 
+    from nlosplan.cli.live import live_page
+    from nlosplan.files import check_output_dir, write_json, writing
     from nlosplan.planner.design.run import run_design
     from nlosplan.reports.design_report import minimum_hardware_text, write_design_report
 
-    from nlosplan.cli.live import live_page
-
+    if args.repair and not args.resume:
+        raise UserError("--repair applies only with --resume")
+    if args.overwrite and args.resume:
+        raise UserError("--overwrite and --resume exclude each other: continue the run or start over")
     cfg = build_config(args)
-    if args.real and not Path(args.real).exists():
-        raise UserError(f"capture store {args.real} does not exist")
-    with live_page(args, "design", args.out), progress_bar(args, None, "design", "eval") as bar:
-        stage = {"last": None}
-
+    check_output_dir(args.out)
+    with live_page(args, "design", args.out), progress_bar(args, None, "design", "evaluation") as bar:
         def progress(text, done, total):
-            if bar is None:  # no terminal: one line per stage on stderr (none with --json)
-                head = text.split(":")[0]
-                if not args.json and head != stage["last"]:
-                    stage["last"] = head
-                    print(f"nlosplan design: {head}", file=sys.stderr, flush=True)
+            stage, _, detail = text.partition(": ")
+            if stage in ("checkpoint",):
+                bar.note(detail)
                 return
-            if total is not None:
-                bar.total = total
-                bar.n = done
-            bar.set_postfix_str(text[:70])
-            bar.refresh()
+            bar.stage(stage)
+            if done is not None:
+                bar.set(done, total, detail)
+            else:
+                bar.set_postfix_str(detail)
 
         result = run_design(cfg, args.out, resume=args.resume, workers=args.workers, cluster=args.cluster,
-                            progress=progress)
-    paths = write_design_report(result, args.out)
-    result["report"] = paths["html"]
-    result["report_markdown"] = paths["markdown"]
-    Path(args.out, "result.json").write_text(json.dumps(result, default=str, indent=1))
-    short = {"requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "minimum", "maximum",
-                                                 "interval", "feasible", "note") if k in r}
+                            progress=progress, overwrite=args.overwrite, repair=args.repair)
+    with writing(kept=f"every evaluation is kept in {args.out} (design_evaluations.jsonl)",
+                 cont="free some space and rerun with --resume: nothing is evaluated again"):
+        paths = write_design_report(result, args.out)
+        result["report"] = paths["html"]
+        result["report_markdown"] = paths["markdown"]
+        write_json(Path(args.out, "result.json"), result, default=str, indent=1)
+    short = {"cheapest": result["cheapest"],
+             "requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "unit", "minimum", "maximum",
+                                                 "interval", "verdict", "feasible", "note") if k in r}
                               for r in result["requirements"]],
-             "cheapest": result["cheapest"], "report": paths["html"],
-             "wall_seconds": result["provenance"]["wall_seconds"], "evaluations": result["evaluations"]}
+             "learners": [r for r in result["learners"] if r["chosen"]],
+             "worlds": None if result["worlds"] is None else {k: result["worlds"][k] for k in
+                                                              ("count", "quorum", "needed", "sources")},
+             "metric_definitions": result["metric_definitions"], "seed": result["provenance"]["seed"],
+             "report": paths["html"], "wall_seconds": result["provenance"]["wall_seconds"],
+             "evaluations": result["evaluations"]}
     text = (minimum_hardware_text(result, result["reference_bin_ps"])
             + f"\n\n{result['evaluations']} evaluations in {result['provenance']['wall_seconds']:.0f} s; "
               f"report: {paths['html']} (also report.md)")
@@ -139,9 +184,24 @@ def add(sub) -> None:
                    help="simulator of the reference histograms: the fast JAX backend (default) or the Mitsuba 3 twin "
                         "(about 0.1 s per scene: the full run's 15,000 scenes take ~30 min; bounds' Jacobians stay fast)")
     p.add_argument("--seeds", type=int_type(1, 20), default=None, help="seeds of the verification (default 3; quick 2)")
+    p.add_argument("--seed", type=int_type(0, MAX_SEED), default=None,
+                   help=f"the run's seed, 0 to {MAX_SEED} (default 0): Poisson noise, train/test splits, training "
+                        "seeds and the worlds are drawn from it")
+    p.add_argument("--models", type=_models, default=None, metavar="M1,M2",
+                   help="candidate learners, compared on the reference design; the best per task is used "
+                        "(default mlp,cnn1d; also cnn3d, transformer)")
+    p.add_argument("--worlds", type=int_type(1, 64), default=None, metavar="K",
+                   help="plausible worlds the cheapest met designs are checked in (default 8; quick 4)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--resume", action="store_true",
-                   help="continue from OUT/design_checkpoint.json; nothing evaluated is computed again")
+                   help="continue from OUT/design_checkpoint.json; nothing evaluated is computed again (an error "
+                        "when OUT holds no run)")
+    p.add_argument("--repair", action="store_true",
+                   help="with --resume: drop damaged lines of OUT/design_evaluations.jsonl (they are named; their "
+                        "evaluations run again; the damaged file is kept as .damaged)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="start over where OUT holds a previous run (its files move to .bak); without it that is "
+                        "an error")
     runner = p.add_argument_group("where evaluations run")
     runner.add_argument("--workers", type=int_type(1, 256), default=None,
                         help="local worker processes (default: the CPU count)")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from nlosplan.cli.common import command_group, emit, int_type, note, number_type, sub_parser
+from nlosplan.cli.common import command_group, emit, int_type, note, number_type, progress_bar, seed_type, sub_parser
 from nlosplan.cli.dataset import _choices, _fidelity, _objects, _positions
 from nlosplan.errors import UserError
 
@@ -81,12 +81,15 @@ def _cmd_crlb(args) -> int:
     nuisance = _nuisance(args.nuisance)
     scenes = [denali_scene(o, s, p, args.lights) for o in args.objects for s in args.sizes for p in args.positions]
     note(args, f"Cramer-Rao bounds of {len(scenes)} scenes, {sensor.name}, fidelity {args.fidelity} ...")
-    batch = localization_crlb_batch(scenes, sensor, fidelity=args.fidelity, repeats=args.repeats, nuisance=nuisance)
+    with progress_bar(args, len(scenes), "evaluate crlb", "scene") as bar:
+        batch = localization_crlb_batch(scenes, sensor, fidelity=args.fidelity, repeats=args.repeats,
+                                        nuisance=nuisance, progress=lambda done, total: bar.set(done, total))
     per_scene, rows, bad_lines = [], [], []
     for r in batch.results:
         m = r.meta
         per_scene.append({"object": m.get("object"), "size": m.get("size"), "position": m.get("position"),
                           "rmse_bound_m": _finite(r.rmse_bound_m), "rmse_bound_known_m": _finite(r.rmse_bound_known_m),
+                          "loc_rmse_bound_m": _finite(r.loc_rmse_bound_m),
                           "std_m": [_finite(float(v)) for v in r.std_m],
                           "identifiable": bool(r.position_identifiable), "reason": r.reason,
                           "notes": list(r.notes)})
@@ -96,6 +99,7 @@ def _cmd_crlb(args) -> int:
             bad_lines.append(f"  {m.get('object')} {m.get('size')} position {m.get('position')}: NOT IDENTIFIABLE"
                              f" ({r.reason or 'no information on the position'})")
     data = {"rms_bound_m": _finite(batch.rms_bound_m), "rms_bound_known_m": _finite(batch.rms_bound_known_m),
+            "loc_rmse_bound_m": _finite(batch.loc_rmse_bound_m),
             "unidentifiable": [per_scene[i] | {"index": i} for i in batch.unidentifiable],
             "seconds": batch.seconds, "fidelity": batch.fidelity, "knobs": batch.knobs,
             "sensor": sensor.name, "lights": args.lights, "repeats": args.repeats, "nuisance": list(nuisance),
@@ -110,22 +114,48 @@ def _cmd_crlb(args) -> int:
         lines.append("")
     notes = sorted({n for r in batch.results for n in r.notes})
     lines += [f"note: {n}" for n in notes] + [batch.summary()]
+    if math.isfinite(batch.loc_rmse_bound_m):  # the figure to set beside a model's loc_rmse (benchmark, design)
+        lines.append(f"bound on DENALI's loc_rmse (x and y pooled: the 2-D bound / sqrt 2): "
+                     f"{1e3 * batch.loc_rmse_bound_m:.3g} mm")
     emit(args, data, "\n".join(lines))
     return 0
 
 
 # ----------------------------------------------------------------- observer
+#: Peak bytes per noisy capture of the observer's draw plan (truths, positions, decisions and the permutations
+#: they come from, int64), beside its fixed log-likelihood chunks and the simulation.
+_BYTES_PER_DRAW = 48
+
+
+def _check_observer_memory(args, sensor) -> None:
+    """Refuse --draws the machine cannot hold, before the simulation (one line)."""
+    from nlosplan.resources import check_memory
+
+    classes = len(args.objects) if args.task == "shape" else 2
+    scenes = len(args.positions) * (len(args.objects) if args.task == "shape" else 2 * len(args.objects))
+    means = scenes * sensor.n_zones * sensor.n_bins * 8 * 3  # float64 means, their logs, a draw block
+    check_memory(1.5e9 + means + args.draws * classes * _BYTES_PER_DRAW, f"--draws {args.draws}",
+                 "use fewer --draws (the interval narrows as 1/sqrt(draws): 1,000 draws give about +-3 %)")
+
+
 def _cmd_observer(args) -> int:
     from nlosplan.tasks.ideal_observer import ideal_observer
 
     if args.shape_known and args.task != "size":
         raise UserError("--shape-known only applies to the size task")
     sensor = _sensor(args)
+    _check_observer_memory(args, sensor)
     note(args, f"ideal observer ({args.task}), {len(args.objects)} objects x {len(args.positions)} positions, "
                f"{args.draws} draws/class, fidelity {args.fidelity} ...")
-    res = ideal_observer(args.task, sensor, objects=args.objects, size=args.size, positions=args.positions,
-                         lights=args.lights, position_known=args.position_known, rule=args.rule,
-                         shape_known=args.shape_known, draws=args.draws, seed=args.seed, fidelity=args.fidelity)
+    with progress_bar(args, None, "evaluate observer", "capture") as bar:
+        def progress(stage, done, total):
+            bar.stage(stage)
+            bar.set(done, total)
+
+        res = ideal_observer(args.task, sensor, objects=args.objects, size=args.size, positions=args.positions,
+                             lights=args.lights, position_known=args.position_known, rule=args.rule,
+                             shape_known=args.shape_known, draws=args.draws, seed=args.seed, fidelity=args.fidelity,
+                             progress=progress)
     data = res.to_dict()
     data["chance"] = res.chance
     data["ci"] = list(res.ci)
@@ -222,8 +252,9 @@ def add(sub) -> None:
     _common(c, jitter=True)
     c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["8in"], metavar="4in,8in",
                    help="object sizes (default: 8in)")
-    c.add_argument("--repeats", type=int_type(1), default=1,
-                   help="independent captures per scene (default: 1; the bound scales as 1/sqrt(repeats))")
+    c.add_argument("--repeats", type=int_type(1, 1_000_000), default=1,
+                   help="independent captures per scene, 1 to 1,000,000 (default: 1; the bound scales as "
+                        "1/sqrt(repeats))")
     c.add_argument("--nuisance", type=_choices(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
                    help="nuisance parameters estimated with the position, among photon_scale, ambient, dark, "
                         "albedo, or 'none' (default: photon_scale)")
@@ -238,7 +269,7 @@ def add(sub) -> None:
                                                                          "(default: 8in)")
     o.add_argument("--draws", type=int_type(1), default=100,
                    help="noisy captures per class (Monte-Carlo precision; default: 100)")
-    o.add_argument("--seed", type=int_type(0), default=0, help="seed of the draws (default: 0)")
+    o.add_argument("--seed", type=seed_type(), default=0, help="seed of the draws, 0 to 2**32-1 (default: 0)")
     o.add_argument("--position-known", action="store_true", help="tell the observer the true position")
     o.add_argument("--shape-known", action="store_true", help="size task: tell the observer the object's shape")
     o.add_argument("--rule", choices=("marginal", "max"), default="marginal",

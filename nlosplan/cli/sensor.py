@@ -20,13 +20,13 @@ def _cmd_sensor_list(args) -> int:
 
 
 def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.sensor_models import resolve_sensor, sensor_base
 
     s = resolve_sensor(args.name)
-    if args.toml:
-        print(s.to_toml())
+    if args.toml:  # with its base preset, so that a saved copy takes later model fields from it
+        print(s.to_toml(base=sensor_base(args.name)))
     elif args.json:
-        print(s.to_json())
+        print(s.to_json(base=sensor_base(args.name)))
     else:
         for k, v in s.to_dict().items():
             if k == "pulse_shape" and v is not None:

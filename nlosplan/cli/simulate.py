@@ -7,39 +7,68 @@ import time
 import warnings
 from pathlib import Path
 
-from nlosplan.cli.common import emit, note, sub_parser
+from nlosplan.cli.common import emit, int_type, note, number_type, seed_type, sub_parser, zones_type
 from nlosplan.errors import UserError
+from nlosplan.files import writing
+from nlosplan.sensor_models.config import MAX_BINS
 
 SCENES = ("denali", "corner", "wall")
+DEFAULT_OUT = "nlosplan-out/simulate"
 
 
 NLOS_SCENES = ("denali", "corner")
 
 
+#: Sensor flags of ``simulate``: flag, the argparse dest, the SensorConfig field, how the change is named.
+_SENSOR_FLAGS = (("--jitter-ps", "jitter_ps", "jitter_fwhm_ps", "jitter {} ps"), ("--bins", "bins", "n_bins", "{} bins"),
+                 ("--bin-width-ps", "bin_width_ps", "bin_width_ps", "{} ps bins"))
+
+
 def _sensor_from_args(args):
+    """The ``--sensor`` with the sensor flags applied; a bad combination names the flags as typed."""
     from nlosplan.sensor_models import resolve_sensor
 
     s = resolve_sensor(args.sensor)
-    changes = {}
-    if args.jitter_ps is not None:
-        changes["jitter_fwhm_ps"] = args.jitter_ps
-    if args.bins is not None:
-        changes["n_bins"] = args.bins
-    if args.bin_width_ps is not None:
-        changes["bin_width_ps"] = args.bin_width_ps
+    changes, parts, flags = {}, [], []
+    for flag, dest, field, shown in _SENSOR_FLAGS:
+        value = getattr(args, dest)
+        if value is not None:
+            changes[field] = value
+            parts.append(shown.format(f"{value:g}"))
+            flags.append(f"{flag} {value:g}")
     if args.zones is not None:
-        try:
-            r, c = (int(x) for x in args.zones.lower().split("x"))
-        except ValueError:
-            raise UserError(f"--zones {args.zones!r} must look like 3x3 or 8x8") from None
-        changes.update(zones_rows=r, zones_cols=c)
+        rows, cols = args.zones
+        changes.update(zones_rows=rows, zones_cols=cols)
+        parts.append(f"{rows}x{cols} zones")
+        flags.append(f"--zones {rows}x{cols}")
     if not changes:
         return s
-    shown = {"jitter_fwhm_ps": "jitter {} ps", "n_bins": "{} bins", "bin_width_ps": "{} ps bins"}
-    parts = [shown[k].format(v) for k, v in changes.items() if k in shown]
-    if "zones_rows" in changes:
-        parts.append(f"{changes['zones_rows']}x{changes['zones_cols']} zones")
-    return s.replace(name=f"{s.name} ({', '.join(parts)})", **changes)
+    try:
+        return s.replace(name=f"{s.name} ({', '.join(parts)})", **changes)
+    except UserError as exc:
+        raise UserError(f"{' '.join(flags)} on {s.name}: {exc}") from None
+
+
+def _warn_zone_mode(args) -> None:
+    """A warning line when --zones changes the zone grid of a sensor built for another zone mode."""
+    from nlosplan.cli.common import warn
+    from nlosplan.sensor_models import PRESET_NAMES, preset, resolve_sensor
+
+    if args.zones is None:
+        return
+    rows, cols = args.zones
+    sensor = resolve_sensor(args.sensor)
+    if (rows, cols) == (sensor.zones_rows, sensor.zones_cols):
+        return
+    text = (f"--zones {rows}x{cols} changes only the zone grid of {sensor.name} ({sensor.zones_rows}x"
+            f"{sensor.zones_cols}): it keeps its {sensor.fov_x_deg:g}x{sensor.fov_y_deg:g} deg field of view and "
+            f"{sensor.iterations} iterations")
+    match = [preset(n) for n in PRESET_NAMES if (preset(n).zones_rows, preset(n).zones_cols) == (rows, cols)]
+    if match:
+        m = match[0]
+        text += (f"; the {rows}x{cols} preset has {m.fov_x_deg:g}x{m.fov_y_deg:g} deg and {m.iterations} iterations "
+                 f"(--sensor {m.name})")
+    warn(text)
 
 
 def _check_scene_options(args) -> None:
@@ -76,12 +105,6 @@ def _parse_zones(text: str) -> list[tuple[int, int]]:
     if not zones or any(len(z) != 2 for z in zones):
         raise UserError(f"--only-zones {text!r} must be ROW,COL pairs separated by ';', e.g. '1,1;0,2'")
     return zones
-
-
-def _npy_path(text: str) -> Path:
-    """``--out`` as the path ``numpy.save`` will write (it appends ``.npy`` when missing)."""
-    out = Path(text)
-    return out if out.suffix == ".npy" else out.with_name(out.name + ".npy")
 
 
 def _with_warning_lines(func, *a, **kw):
@@ -128,19 +151,38 @@ def _nlos_scene(args):
                                  yaw_deg="object_yaw"), **xy, lights_on=args.lights == "on", **common)
 
 
-def _save_nlos(result, out: Path) -> dict:
-    """Write the expected, background, signal and count arrays beside ``out``; return ``{name: path}``."""
-    import numpy as np
+#: The files of a DENALI or corner run inside ``--out``, and their arrays.
+NLOS_FILES = {"expected": "expected.npy", "background": "background.npy", "signal": "signal.npy",
+              "counts": "counts.npy", "background_counts": "background_counts.npy"}
+WALL_FILES = {"expected": "expected.npy", "counts": "counts.npy"}
+PLOT_FILE = "histograms.png"
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {"expected": result.expected, "background": result.background, "signal": result.signal,
-              "counts": result.counts, "background_counts": result.background_counts}
-    files = {}
-    for key, arr in arrays.items():
-        if arr is not None:
-            path = out if key == "expected" else out.with_name(f"{out.stem}_{key}.npy")
-            np.save(path, arr)
-            files[key] = str(path)
+
+def _file_paths(out: Path, legacy: bool, names: dict) -> dict[str, Path]:
+    """``{array: path}``: fixed names inside the folder ``out``, or (deprecated ``--out X.npy``) X.npy, X_<name>.npy."""
+    if not legacy:
+        return {k: out / v for k, v in names.items()}
+    return {k: out if k == "expected" else out.with_name(f"{out.stem}_{k}.npy") for k in names}
+
+
+def _save(arrays: dict, paths: dict[str, Path], seconds: float) -> dict:
+    """Write each array (None: skipped) atomically; return ``{name: path}``.
+
+    A failed write (full disk, ...) is one line naming the files written
+    before it (complete) and the simulation time lost; nothing partial is left.
+    """
+    from nlosplan.files import WriteFailed, save_npy
+
+    files: dict[str, str] = {}
+    for k, arr in arrays.items():
+        if arr is None:
+            continue
+        try:
+            files[k] = str(save_npy(paths[k], arr))
+        except WriteFailed as exc:
+            done = f"{', '.join(Path(v).name for v in files.values())} written complete, " if files else ""
+            raise WriteFailed(f"{exc}; {done}nothing partial left; the {seconds:.1f} s simulation is lost: free some "
+                              "space or choose another --out and rerun") from None
     return files
 
 
@@ -223,10 +265,72 @@ def _nlos_summary(args, scene, sensor, result, zones, fidelity: str, files: dict
     return data, "\n".join(lines)
 
 
-def _simulate_nlos(args, sensor) -> int:
+def _outputs(args) -> tuple[Path | None, bool, Path | None]:
+    """``--out`` (folder, or the deprecated .npy file), whether it is the deprecated form, ``--plot``; checked.
+
+    Everything is checked before any work: the folder (or file) can be
+    written, the plot's suffix is a known image type. ``--explain`` alone
+    (no ``--out``, no ``--plot``) writes nothing: returns (None, False, None).
+    """
+    from nlosplan.files import check_output_dir, check_output_file, check_plot_path
+
+    if args.explain and args.out is None and args.plot is None:
+        return None, False, None
+    out = Path(args.out if args.out is not None else DEFAULT_OUT)
+    legacy = out.suffix == ".npy"
+    if legacy:
+        check_output_file(out, "--out")
+    else:
+        check_output_dir(out, "--out")
+    plot = None
+    if args.plot is True:
+        plot = (out.parent / (out.stem + ".png")) if legacy else out / PLOT_FILE
+    elif args.plot:  # '' (the old way to ask for none) stays none
+        plot = Path(args.plot)
+    if plot is not None:
+        check_plot_path(plot, "--plot")
+    return out, legacy, plot
+
+
+def _warn_before_work(args, out: Path | None, legacy: bool) -> None:
+    """Warning lines (a preset's zone mode changed, the deprecated ``--out X.npy``), once every input passed its
+    checks: a bad input stays one line."""
+    from nlosplan.cli.common import warn
+
+    _warn_zone_mode(args)
+    if legacy:
+        warn(f"--out {args.out} (a .npy file) is deprecated: give a folder, e.g. --out {out.with_suffix('')}, "
+             f"to get {', '.join(NLOS_FILES.values() if args.scene != 'wall' else WALL_FILES.values())} in it")
+
+
+#: Peak memory of ``simulate``, measured with /usr/bin/time (maximum resident set) on the DENALI scene
+#: (docs/reliability.md): about 0.5 GB at 3x3 x 128 bins whatever the fidelity and zones, ~400 bytes more
+#: per histogram cell (0.9 GB at 16x16 x 4096), and 56-58 bytes per noisy cell drawn (with and without the
+#: object: 1.2 GB at 5,000 repeats of 3x3 x 128, 3.1 GB at 20,000). Rounded up.
+_BASE_BYTES = 0.6e9
+_BYTES_PER_CELL = 500
+_BYTES_PER_DRAWN_CELL = 60
+
+
+def _check_memory(args, sensor, n_zones: int, out: Path | None) -> None:
+    """Refuse, before any work, a run whose estimated peak memory (or output size) exceeds what the machine has."""
+    from nlosplan.files import check_free_space
+    from nlosplan.resources import check_memory
+
+    cells = n_zones * sensor.n_bins
+    drawn = 2 * args.repeats * cells * _BYTES_PER_DRAWN_CELL  # with and without the object
+    shown = " ".join(f for f in (f"--repeats {args.repeats}" if args.repeats > 1 else "",
+                                  f"--zones {args.zones[0]}x{args.zones[1]}" if args.zones else "",
+                                  f"--bins {args.bins}" if args.bins else "") if f) or "this simulation"
+    check_memory(_BASE_BYTES + cells * _BYTES_PER_CELL + drawn, shown, "use fewer --repeats, --zones or --bins")
+    if out is not None:  # the arrays' size on disk: expected, background, signal; 2 x repeats int64 captures
+        floats = 8 if args.scene == "wall" or args.dtype == "float64" else 4
+        check_free_space(out, cells * (3 * floats + 2 * args.repeats * 8) + 5 * 128, "--out")
+
+
+def _simulate_nlos(args, sensor, out, legacy, plot) -> int:
     """``simulate --scene denali|corner``: expected, background, signal, noisy captures, plot, summary."""
-    from nlosplan.reports import plot_simulation
-    from nlosplan.simulators import simulate
+    from nlosplan.simulators import explain, simulate
 
     zones = None if args.only_zones is None else _parse_zones(args.only_zones)
     backend = args.backend or "fast"
@@ -235,51 +339,59 @@ def _simulate_nlos(args, sensor) -> int:
                         "not to --backend mitsuba")
     scene = _nlos_scene(args)
     fidelity = args.fidelity or "default"
+    if out is None:  # --explain alone: the plan, no simulation, no files
+        _warn_before_work(args, None, False)
+        plan, warned = _with_warning_lines(explain, scene, sensor, fidelity=fidelity, zones=zones)
+        data = {"scene": {"kind": args.scene, "name": scene.name}, "sensor": sensor.name, "fidelity": fidelity,
+                "plan": plan.to_dict(), "warnings": warned}
+        emit(args, data, plan.explain())
+        return 0
+    _check_memory(args, sensor, len(zones) if zones is not None else sensor.n_zones, out)
+    _warn_before_work(args, out, legacy)
     note(args, f"simulating {scene.name} with {sensor.name} ({backend} backend, fidelity {fidelity}) ...")
     result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
                                          fidelity=fidelity, zones=zones, backend=backend, **_given(args, dtype="dtype"))
-    files = _save_nlos(result, _npy_path(args.out))
-    if args.plot:
-        labels = None if zones is None else [f"zone ({r},{c})" for r, c in zones]
-        plot_simulation(result.expected, result.parts, result.signal, args.plot, bin_width_ps=sensor.bin_width_ps,
-                        start_offset_ps=sensor.start_offset_ps, title=_nlos_title(args, result.meta, sensor, fidelity),
-                        samples=None if result.counts is None else result.counts[0], zone_labels=labels)
-        files["plot"] = str(args.plot)
+    files = _save({k: getattr(result, k) for k in NLOS_FILES}, _file_paths(out, legacy, NLOS_FILES), result.seconds)
+    with writing(kept="the arrays are written", cont="free some space or choose another --plot and rerun"):
+        if plot is not None:
+            from nlosplan.reports import plot_simulation
+
+            labels = None if zones is None else [f"zone ({r},{c})" for r, c in zones]
+            plot_simulation(result.expected, result.parts, result.signal, plot, bin_width_ps=sensor.bin_width_ps,
+                            start_offset_ps=sensor.start_offset_ps,
+                            title=_nlos_title(args, result.meta, sensor, fidelity),
+                            samples=None if result.counts is None else result.counts[0], zone_labels=labels)
+            files["plot"] = str(plot)
     data, text = _nlos_summary(args, scene, sensor, result, zones, fidelity, files, warned)
     emit(args, data, text)
     return 0
 
 
-def _simulate_wall(args, sensor) -> int:
+def _simulate_wall(args, sensor, out, legacy, plot) -> int:
     """``simulate --scene wall``: the first-bounce wall capture (expected, noisy captures, plot)."""
-    import numpy as np
-
-    from nlosplan.reports import plot_zone_histograms
     from nlosplan.simulators import WallScene, simulate_wall
 
     if args.samples is not None and args.samples < 1:
         raise UserError(f"--samples {args.samples} must be >= 1")
     scene = WallScene(**_given(args, distance_m="distance", yaw_deg="yaw", pitch_deg="pitch", albedo="albedo"),
                       lights_on=args.lights == "on")
+    _check_memory(args, sensor, sensor.n_zones, out)
+    _warn_before_work(args, out, legacy)
     fidelity = _given(args, n_sub="samples")
     t0 = time.perf_counter()
     mean = simulate_wall(scene, sensor, **fidelity)
     counts = simulate_wall(scene, sensor, **fidelity, rng=args.seed, repeats=args.repeats) if args.repeats else None
     seconds = time.perf_counter() - t0
-    out = _npy_path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.save(out, mean)
-    files = {"expected": str(out)}
-    if counts is not None:
-        cpath = out.with_name(out.stem + "_counts.npy")
-        np.save(cpath, counts)
-        files["counts"] = str(cpath)
-    if args.plot:
-        title = (f"{sensor.name}: wall at {scene.distance_m:g} m (yaw {scene.yaw_deg:g}, pitch {scene.pitch_deg:g} deg), "
-                 f"lights {args.lights}, jitter {sensor.jitter_fwhm_ps:g} ps")
-        plot_zone_histograms(mean, args.plot, bin_width_ps=sensor.bin_width_ps, start_offset_ps=sensor.start_offset_ps,
-                             title=title, samples=None if counts is None else counts[0])
-        files["plot"] = str(args.plot)
+    files = _save({"expected": mean, "counts": counts}, _file_paths(out, legacy, WALL_FILES), seconds)
+    with writing(kept="the arrays are written", cont="free some space or choose another --plot and rerun"):
+        if plot is not None:
+            from nlosplan.reports import plot_zone_histograms
+
+            title = (f"{sensor.name}: wall at {scene.distance_m:g} m (yaw {scene.yaw_deg:g}, pitch {scene.pitch_deg:g} "
+                     f"deg), lights {args.lights}, jitter {sensor.jitter_fwhm_ps:g} ps")
+            plot_zone_histograms(mean, plot, bin_width_ps=sensor.bin_width_ps, start_offset_ps=sensor.start_offset_ps,
+                                 title=title, samples=None if counts is None else counts[0])
+            files["plot"] = str(plot)
     peak_bins = mean.argmax(-1)
     summary = {
         "scene": {"kind": "wall", **scene.__dict__},
@@ -298,14 +410,13 @@ def _simulate_wall(args, sensor) -> int:
 
 
 def _cmd_simulate(args) -> int:
-    """``nlosplan simulate``: check the options against the scene, build the sensor, run the scene."""
+    """``nlosplan simulate``: check the options and outputs, build the sensor, run the scene."""
     _check_scene_options(args)
-    if args.repeats < 0:
-        raise UserError(f"--repeats {args.repeats} must be >= 0")
+    out, legacy, plot = _outputs(args)
     sensor = _sensor_from_args(args)
     if args.scene == "wall":
-        return _simulate_wall(args, sensor)
-    return _simulate_nlos(args, sensor)
+        return _simulate_wall(args, sensor, out, legacy, plot)
+    return _simulate_nlos(args, sensor, out, legacy, plot)
 
 
 SIMULATE_DESCRIPTION = """\
@@ -317,15 +428,18 @@ scenes:
   corner  a parametric corner: LiDAR, relay wall and a hidden object beside it
   wall    a plain wall in front of the sensor (first bounce only)
 
-outputs (denali, corner), for --out X.npy:
-  X.npy                    expected counts with the object, (rows, cols, bins),
-                           or (zones, bins) with --only-zones
-  X_background.npy         the same capture without the object (DENALI's NOOBJECT)
-  X_signal.npy             X minus background: the object's three-bounce return
-  X_counts.npy             noisy captures, int64, (repeats, ...) when --repeats > 0
-  X_background_counts.npy  noisy captures without the object
-The wall scene writes X.npy and X_counts.npy. Options of another scene are
-rejected."""
+outputs (denali, corner), in the folder --out (default: nlosplan-out/simulate):
+  expected.npy           expected counts with the object, (rows, cols, bins),
+                         or (zones, bins) with --only-zones
+  background.npy         the same capture without the object (DENALI's NOOBJECT)
+  signal.npy             expected minus background: the object's three-bounce return
+  counts.npy             noisy captures, int64, (repeats, ...) when --repeats > 0
+  background_counts.npy  noisy captures without the object
+  histograms.png         with --plot: a plot of every zone (or --plot PATH)
+The wall scene writes expected.npy and counts.npy. --explain alone prints the
+plan of terms without simulating or writing anything. (--out X.npy, the old
+form, still writes X.npy, X_background.npy, ... beside it, with a warning.)
+Options of another scene are rejected."""
 
 
 def _scene_options(group, scenes: tuple[str, ...], registry: dict):
@@ -370,7 +484,7 @@ def add(sub) -> None:
         help="object reflectance (default: retroreflective for denali, lambertian for corner)")
     add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: 0.5)")
     add("--lobe-deg", type=float, metavar="DEG", help="retroreflective lobe FWHM, degrees (default: 2)")
-    add("--diffuse-albedo", type=float, metavar="A", help="Lambertian base of a retroreflective object, 0..1, with "
+    add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A", help="Lambertian base of a retroreflective object, 0..1, with "
                                                           "object albedo + diffuse albedo <= 1 (default: 0)")
     add("--backend", choices=["fast", "mitsuba"],
         help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
@@ -392,17 +506,22 @@ def add(sub) -> None:
 
     sen = sim.add_argument_group("sensor (all scenes)")
     sen.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
-    sen.add_argument("--jitter-ps", type=float, help="override timing jitter FWHM, ps")
-    sen.add_argument("--bins", type=int, help="override number of bins")
-    sen.add_argument("--bin-width-ps", type=float, help="override bin width, ps")
-    sen.add_argument("--zones", help="override the zone grid, e.g. 8x8")
+    sen.add_argument("--jitter-ps", type=number_type(float, zero_ok=True), metavar="J",
+                     help="override timing jitter FWHM, ps (>= 0)")
+    sen.add_argument("--bins", type=int_type(1, MAX_BINS), metavar="N", help=f"override number of bins (1 to {MAX_BINS})")
+    sen.add_argument("--bin-width-ps", type=number_type(float), metavar="W", help="override bin width, ps (> 0)")
+    sen.add_argument("--zones", type=zones_type, metavar="RxC",
+                     help="override the zone grid, e.g. 8x8 (the preset's field of view and iterations stay: a warning "
+                          "says so; pick the preset of that zone mode instead)")
 
     out = sim.add_argument_group("capture and output (all scenes)")
     out.add_argument("--lights", choices=["on", "off"], default="off", help="room lights (default: off)")
-    out.add_argument("--repeats", type=int, default=1, help="noisy captures to draw (default: 1; 0 for none)")
-    out.add_argument("--seed", type=int, default=0, help="random seed of the noisy captures (default: 0)")
-    out.add_argument("--out", default="nlosplan-out/histogram.npy", help="expected counts .npy (default: %(default)s)")
-    out.add_argument("--plot", default="nlosplan-out/histogram.png", help="PNG plot of every zone ('' for none)")
+    out.add_argument("--repeats", type=int_type(0), default=1, help="noisy captures to draw (default: 1; 0 for none)")
+    out.add_argument("--seed", type=seed_type(), default=0, help="random seed of the noisy captures, 0 to 2**32-1 "
+                                                                 "(default: 0)")
+    out.add_argument("--out", metavar="DIR", help=f"output folder, files with fixed names inside (default: {DEFAULT_OUT})")
+    out.add_argument("--plot", nargs="?", const=True, metavar="PATH",
+                     help=f"also plot every zone: OUT/{PLOT_FILE}, or PATH (.png, .pdf, .svg, ...)")
     out.add_argument("--json", action="store_true", help="machine-readable summary")
     sim.set_defaults(func=_cmd_simulate, scene_options=only)
 

@@ -21,7 +21,6 @@ skipped in the import summary).
 from __future__ import annotations
 
 import json
-import os
 import re
 import time
 from pathlib import Path
@@ -29,12 +28,19 @@ from typing import Callable
 
 import numpy as np
 
+from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError
+from nlosplan.files import save_npy, write_json
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.denali import DENALI_OBJECTS, class_group
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
-__all__ = ["BACKGROUNDS", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
+__all__ = ["BACKGROUNDS", "NoCaptureFiles", "OBJECT_ALIASES", "SOURCE", "export_denali", "import_denali", "load_positions"]
+
+
+class NoCaptureFiles(UserError):
+    """A folder given to :func:`import_denali` holds no capture file (nothing is stored)."""
+
 
 #: ``source`` label of imported captures.
 SOURCE = "real:denali"
@@ -116,18 +122,42 @@ def _read(path: Path, ext: str, trust: bool) -> np.ndarray:
 
 
 def _as_counts(arr: np.ndarray, path: Path, shape: tuple) -> tuple[np.ndarray, str]:
-    """Checked histograms (repeats, *shape): int64 when the values are whole numbers, else float32."""
+    """Checked histograms (repeats, *shape) as int64 counts; UserError for anything a TMF8828 cannot count.
+
+    Counts are whole numbers from 0 to the 24-bit register maximum; floats
+    are accepted when they hold whole numbers (within float precision) in
+    that range. Negative, NaN, infinite, fractional and too large values are
+    refused with the file, the first bad value and its index (a float of
+    1e30 would otherwise wrap to a negative int64).
+    """
     if arr.ndim != 4 or arr.shape[1:] != shape or arr.shape[0] < 1:
         raise UserError(f"{path}: histogram shape {arr.shape}, expected (repeats, {', '.join(map(str, shape))})")
-    try:
-        values = arr.astype(np.int64) if np.issubdtype(arr.dtype, np.integer) else arr.astype(np.float64)
-    except (TypeError, ValueError):
-        raise UserError(f"{path}: histogram values of dtype {arr.dtype} are not numbers") from None
-    if not np.all(np.isfinite(values)) or values.min() < 0:
-        raise UserError(f"{path}: histogram has negative, NaN or infinite counts")
+    if arr.dtype.kind == "O":  # a trusted pickle of Python numbers
+        try:
+            arr = arr.astype(np.float64)
+        except (TypeError, ValueError):
+            raise UserError(f"{path}: histogram values of dtype {arr.dtype} are not numbers") from None
+    if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise UserError(f"{path}: histogram values of dtype {arr.dtype} are not counts (integers)")
+    values = arr.astype(np.float64) if np.issubdtype(arr.dtype, np.floating) else arr
     if values.dtype == np.float64:
-        values = values.astype(np.int64) if np.array_equal(values, np.round(values)) else values.astype(np.float32)
-    return values, str(arr.dtype)
+        if not np.isfinite(values).all():
+            raise _count_error(path, values, ~np.isfinite(values), "not a finite number")
+        frac = np.abs(values - np.round(values)) > 1e-6 * np.maximum(1.0, np.abs(values))
+        if frac.any():
+            raise _count_error(path, values, frac, "not a whole number of counts")
+        values = np.round(values)
+    for bad, why in ((values < 0, "negative"),
+                     (values > MAX_COUNT_24BIT, f"above the sensor's 24-bit range (at most {MAX_COUNT_24BIT})")):
+        if bad.any():
+            raise _count_error(path, values, bad, why)
+    return values.astype(np.int64), str(arr.dtype)
+
+
+def _count_error(path: Path, values: np.ndarray, bad: np.ndarray, why: str) -> UserError:
+    idx = tuple(int(i) for i in np.argwhere(bad)[0])
+    return UserError(f"{path}: count {values[idx].item()!r} at index {list(idx)} is {why} ({int(bad.sum())} such values); "
+                     "nothing was imported")
 
 
 def _sensors(sensors) -> dict[str, SensorConfig]:
@@ -161,11 +191,18 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
                   source: str = SOURCE, progress: Progress | None = None) -> dict:
     """Import a DENALI data folder into a store, resumably (captures stored already are skipped).
 
+    Every capture file is checked (layout, shape, counts in the sensor's
+    range, pickle) before anything is stored: a bad file stops the import
+    with one line and nothing of it lands in the store; a folder with no
+    capture file at all is an error and creates no store.
+
     Parameters
     ----------
     root : str or Path
         The folder holding the ``*_NLOSdata`` folders.
-    store : CaptureStore
+    store : CaptureStore, str or Path
+        The target store; a path is opened (and created when missing) only
+        once the files passed the checks.
     positions_json : str or Path, optional
         ``tag1_positions.json`` giving (x, y) per capture number (default: the packaged DENALI one).
     trust_pickle : bool
@@ -176,7 +213,7 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
     source : str
         ``source`` label of the captures.
     progress : callable, optional
-        ``progress(done, total, text)`` per capture file.
+        ``progress(done, total, text)`` per capture file (checked, then imported: ``total`` is twice the files).
 
     Returns
     -------
@@ -188,17 +225,75 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
     Raises
     ------
     UserError
-        ``root`` is not a folder; a capture file is corrupt, has the wrong
-        shape or negative counts, or needs pickle without ``trust_pickle``
-        (the message names the file; rerun after fixing it). Pickle and
-        unreadable ``.npy`` headers are found before anything is imported.
+        ``root`` is not a folder or holds no capture file; a capture file is
+        corrupt, has the wrong shape, counts a TMF8828 cannot give (negative,
+        fractional, NaN, above 24 bits), or needs pickle without
+        ``trust_pickle`` (the message names the file; nothing was imported).
     """
+    from nlosplan.data.store import CaptureStore
+
     t0 = time.perf_counter()
     root = Path(root)
     if not root.is_dir():
         raise UserError(f"DENALI data folder {root} does not exist or is not a folder")
     positions = load_positions(positions_json)
     by_zones = _sensors(sensors)
+    work, skipped = _scan(root, positions, by_zones, trust_pickle)
+    if not work:
+        why = f"; {len(skipped)} entries skipped, e.g. {skipped[0]['path']}: {skipped[0]['reason']}" if skipped else ""
+        raise NoCaptureFiles(f"no capture files to import in {root} (expected <object>_<4inch|8inch>_<3x3|8x8>_"
+                        f"<lighton|lightoff>_NLOSdata/spad_histogram/NNN.npy){why}")
+    owned = not isinstance(store, CaptureStore)
+    if owned:
+        store_path = Path(store)
+        if store_path.exists():  # skip what it holds already (read-only look; created below only after the checks)
+            with CaptureStore(store_path, readonly=True) as st:
+                stored = st.keys(source=source)
+        else:
+            stored = set()
+    else:
+        stored = store.keys(source=source)
+    todo = []
+    for i, (folder, f, ext, number, lab, header) in enumerate(work):
+        sensor = by_zones[lab["zones"]]
+        base = dict(lab, position=number, x=positions[number][0], y=positions[number][1], source=source)
+        n = header[0][0] if header is not None and len(header[0]) == 4 else 0
+        if n and all(capture_key(dict(base, repeat=r), sensor_hash(sensor)) in stored for r in range(n)):
+            todo.append(None)
+        else:
+            _as_counts(_read(f, ext, trust_pickle), f, (sensor.zones_rows, sensor.zones_cols, sensor.n_bins))
+            todo.append(base)
+        if progress:
+            progress(i + 1, 2 * len(work), f"checked {folder.name}/{f.name}")
+    if owned:
+        store = CaptureStore(store_path, create=True)
+    files = files_stored = added = already = 0
+    try:
+        for i, ((folder, f, ext, number, lab, header), base) in enumerate(zip(work, todo)):
+            if base is None:
+                files_stored += 1
+                already += header[0][0]
+            else:
+                sensor = by_zones[lab["zones"]]
+                counts, src_dtype = _as_counts(_read(f, ext, trust_pickle), f,
+                                               (sensor.zones_rows, sensor.zones_cols, sensor.n_bins))
+                meta = {"folder": folder.name, "file": f.name, "source_dtype": src_dtype}
+                res = store.put_many(((counts[r], dict(base, repeat=r)) for r in range(len(counts))), sensor=sensor,
+                                     meta=meta)
+                files, added, already = files + 1, added + res.added, already + res.skipped
+            if progress:
+                progress(len(work) + i + 1, 2 * len(work), f"{folder.name}/{f.name}")
+    finally:
+        if owned:
+            store.close()
+    folders = len({w[0] for w in work})
+    return {"root": str(root), "store": str(store.path), "source": source, "folders": folders, "files": files,
+            "files_stored_already": files_stored, "captures_added": added, "captures_skipped": already,
+            "skipped": skipped, "seconds": time.perf_counter() - t0}
+
+
+def _scan(root: Path, positions: dict, by_zones: dict, trust_pickle: bool) -> tuple[list, list[dict]]:
+    """The capture files of a DENALI folder (folder, file, ext, number, labels, npy header) and what is skipped."""
     skipped: list[dict] = []
     work = []
     for f in sorted(p for p in root.iterdir() if p.is_file() and p.suffix in (".pkl", ".joblib")):
@@ -225,34 +320,7 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
                 if not trust_pickle and (header is None or header[1].hasobject):
                     raise _pickle_refusal(f)  # before anything is imported
                 work.append((folder, f, m["ext"], int(m["number"]), lab, header))
-    stored = store.keys(source=source)
-    files = files_stored = added = already = 0
-    if progress:
-        progress(0, len(work), "starting")
-    for i, (folder, f, ext, number, lab, header) in enumerate(work):
-        sensor = by_zones[lab["zones"]]
-        h = sensor_hash(sensor)
-        x, y = positions[number]
-        base = dict(lab, position=number, x=x, y=y, source=source)
-        if header is not None:
-            n = header[0][0] if len(header[0]) == 4 else 0
-            if n and all(capture_key(dict(base, repeat=r), h) in stored for r in range(n)):
-                files_stored += 1
-                already += n
-                if progress:
-                    progress(i + 1, len(work), f"{folder.name}: stored already")
-                continue
-        counts, src_dtype = _as_counts(_read(f, ext, trust_pickle), f, (sensor.zones_rows, sensor.zones_cols,
-                                                                          sensor.n_bins))
-        meta = {"folder": folder.name, "file": f.name, "source_dtype": src_dtype}
-        res = store.put_many(((counts[r], dict(base, repeat=r)) for r in range(len(counts))), sensor=sensor, meta=meta)
-        files, added, already = files + 1, added + res.added, already + res.skipped
-        if progress:
-            progress(i + 1, len(work), f"{folder.name}/{f.name}")
-    folders = len({w[0] for w in work})
-    return {"root": str(root), "store": str(store.path), "source": source, "folders": folders, "files": files,
-            "files_stored_already": files_stored, "captures_added": added, "captures_skipped": already,
-            "skipped": skipped, "seconds": time.perf_counter() - t0}
+    return work, skipped
 
 
 def _write_npy(path: Path, arr: np.ndarray, overwrite: bool) -> bool:
@@ -266,10 +334,7 @@ def _write_npy(path: Path, arr: np.ndarray, overwrite: bool) -> bool:
             return False
         if not overwrite:
             raise UserError(f"{path} exists with other data; pass --overwrite (overwrite=True) to replace it")
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        np.save(f, arr, allow_pickle=False)
-    os.replace(tmp, path)
+    save_npy(path, arr)
     return True
 
 
@@ -354,8 +419,6 @@ def export_denali(store, root, *, overwrite: bool = False, progress: Progress | 
         if clash and not overwrite:
             raise UserError(f"{pos_path} gives other positions for {', '.join(clash[:3])}; pass --overwrite to replace")
         positions = {**old, **positions}
-    tmp = pos_path.with_name(".tag1_positions.json.tmp")
-    tmp.write_text(json.dumps(dict(sorted(positions.items(), key=lambda kv: int(kv[0][5:].split("_")[0]))), indent=1))
-    os.replace(tmp, pos_path)
+    write_json(pos_path, dict(sorted(positions.items(), key=lambda kv: int(kv[0][5:].split("_")[0]))), indent=1)
     return {"root": str(root), "folders": len(folders), "files_written": written, "files_unchanged": unchanged,
             "captures": int(len(labels)), "positions": len(first)}

@@ -34,14 +34,17 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sqlite3
 from pathlib import Path
 from typing import Iterable, Iterator
+from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
 
 from nlosplan.errors import UserError
+from nlosplan.files import WriteFailed, check_output_file
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.data.dataset import LABEL_COLUMNS, Dataset
 from nlosplan.data.records import (
@@ -78,6 +81,11 @@ class CaptureStore:
         power cuts, NORMAL only process crashes (and is ~20x faster).
     timeout : float
         Seconds to wait for another writer's lock.
+    readonly : bool
+        Open an existing store for reading only (SQLite ``mode=ro``;
+        ``immutable=1`` on a read-only medium): what commands that only read
+        use, so an archived or shared store, a read-only file or folder can be
+        read and is never changed.
 
     Raises
     ------
@@ -93,20 +101,27 @@ class CaptureStore:
     ...     ds = store.load(lights="off")
     """
 
-    def __init__(self, path, *, create: bool = True, synchronous: str = "FULL", timeout: float = 30.0):
+    def __init__(self, path, *, create: bool = True, synchronous: str = "FULL", timeout: float = 30.0,
+                 readonly: bool = False):
         self.path = Path(path)
+        self.readonly = bool(readonly)
         if str(synchronous).upper() not in ("FULL", "NORMAL"):
             raise UserError(f"synchronous={synchronous!r} is not allowed; allowed: FULL, NORMAL")
         if self.path.is_dir():
             raise UserError(f"capture store {self.path} is a folder; give a file path such as "
                             f"{self.path / 'captures.sqlite'}")
         if not self.path.exists():
-            if not create:
+            if not create or readonly:
                 raise UserError(f"capture store {self.path} does not exist")
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._check_creatable()
+        elif not readonly and not os.access(self.path, os.W_OK):
+            raise UserError(f"capture store {self.path} is read-only; it can be read but not written to")
         self._sensors: dict[str, SensorConfig] = {}
         try:
-            self._db = sqlite3.connect(str(self.path), timeout=timeout, isolation_level=None)
+            if readonly:
+                self._db = sqlite3.connect(self._readonly_uri(), uri=True, timeout=timeout, isolation_level=None)
+            else:
+                self._db = sqlite3.connect(str(self.path), timeout=timeout, isolation_level=None)
         except sqlite3.Error as exc:
             raise UserError(f"cannot open capture store {self.path}: {exc}") from None
         try:
@@ -121,16 +136,47 @@ class CaptureStore:
             self._db.close()
             raise
 
+    def _check_creatable(self) -> None:
+        """Before a new store is created: its folder must be a writable folder (one line otherwise)."""
+        check_output_file(self.path, "capture store")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+
+    def _readonly_uri(self) -> str:
+        """SQLite URI opening the file read-only; ``immutable=1`` where nothing can write it (read-only medium).
+
+        On a writable medium ``mode=ro`` (other writers may go on; SQLite may
+        add its empty ``-shm``/``-wal`` side files). Where the file or its
+        folder cannot be written (a read-only mount, an archive) SQLite
+        cannot create those side files, so the file is opened immutable:
+        possible only when no un-checkpointed write-ahead log lies beside it.
+        """
+        folder = self.path.resolve().parent
+        ro_medium = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+        frozen = ro_medium or not os.access(folder, os.W_OK) or not os.access(self.path, os.W_OK)
+        wal = self.path.with_name(self.path.name + "-wal")
+        shm = self.path.with_name(self.path.name + "-shm")
+        uri = f"file:{quote(str(self.path.resolve()))}?mode=ro"
+        if not frozen or shm.exists():
+            return uri
+        if wal.exists() and wal.stat().st_size > 0:
+            raise UserError(f"capture store {self.path} is on a read-only medium with writes still in its "
+                            f"write-ahead log {wal.name}; open it once where it can be written to merge them")
+        return uri + "&immutable=1"
+
     def _open(self, synchronous: str) -> None:
         db = self._db
         app = db.execute("PRAGMA application_id").fetchone()[0]
         version = db.execute("PRAGMA user_version").fetchone()[0]
         n_tables = db.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
-        if app != APPLICATION_ID and (app != 0 or n_tables):
-            raise UserError(f"{self.path} is an SQLite file but not an nlosplan capture store; choose another path")
+        if app != APPLICATION_ID and (app != 0 or n_tables or self.readonly):
+            raise UserError(f"{self.path} is not an nlosplan capture store"
+                            + ("" if app == 0 and not n_tables else " (an SQLite file of something else)")
+                            + ("" if self.readonly else "; choose another path"))
         if app == APPLICATION_ID and version > SCHEMA_VERSION:
             raise UserError(f"capture store {self.path} has schema version {version}, newer than this nlosplan "
                             f"({SCHEMA_VERSION}); upgrade nlosplan")
+        if self.readonly:
+            return
         if db.execute("PRAGMA journal_mode=WAL").fetchone()[0].lower() != "wal":
             raise UserError(f"capture store {self.path}: the file system does not support SQLite WAL mode")
         db.execute(f"PRAGMA synchronous={synchronous}")
@@ -175,15 +221,24 @@ class CaptureStore:
 
     def _insert(self, row: tuple, sensor_row: tuple) -> tuple[int, bool]:
         db = self._conn()
-        db.execute("BEGIN IMMEDIATE")
+        if self.readonly:
+            raise UserError(f"capture store {self.path} was opened read-only")
         try:
-            db.execute("INSERT OR IGNORE INTO sensors VALUES (?, ?, ?, ?, ?, ?)", sensor_row)
-            cur = db.execute(self._INSERT, row)
-            new = cur.rowcount == 1
-            rid = cur.lastrowid if new else db.execute("SELECT id FROM captures WHERE key = ?", (row[0],)).fetchone()[0]
-            db.execute("COMMIT")
-        except BaseException:
-            db.execute("ROLLBACK")
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                db.execute("INSERT OR IGNORE INTO sensors VALUES (?, ?, ?, ?, ?, ?)", sensor_row)
+                cur = db.execute(self._INSERT, row)
+                new = cur.rowcount == 1
+                rid = cur.lastrowid if new else db.execute("SELECT id FROM captures WHERE key = ?",
+                                                           (row[0],)).fetchone()[0]
+                db.execute("COMMIT")
+            except BaseException:
+                if db.in_transaction:
+                    db.execute("ROLLBACK")
+                raise
+        except sqlite3.OperationalError as exc:
+            if "full" in str(exc) or "disk I/O" in str(exc) or "readonly" in str(exc):
+                raise WriteFailed(f"capture store {self.path}: {exc}; the captures committed before are kept") from None
             raise
         return int(rid), new
 

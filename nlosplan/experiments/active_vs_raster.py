@@ -14,9 +14,10 @@ feed/acceleration model) up to ``budget`` captures, once per seed (the
 seed draws the Poisson noise and the planner's random state). After every
 batch:
 
-- localization RMSE of the planner's ensemble localizer on a fixed set of
-  noisy test captures at ``test_points`` quasi-random positions (not on
-  the candidate grid);
+- localization RMSE (DENALI's ``loc_rmse``, x and y errors pooled; the
+  curve's ``rmse_m`` and the targets ``target_rmse_m`` are in it) of the
+  planner's ensemble localizer on a fixed set of noisy test captures at
+  ``test_points`` quasi-random positions (not on the candidate grid);
 - calibration error of the maximum-likelihood calibration, the largest
   parameter error in units of its tolerance (0.5 mm, 0.5 mm, 1 %, 1 %).
 
@@ -136,7 +137,7 @@ def _run_one(space, rig, test_obs, study: ActiveStudy, strategy: str, seed: int)
                             "seconds": rig.motion.route_seconds(pos, here[None]), "position_mm": here})
             pos = here
         planner.ingest(results)
-        rmse = planner.localizer().rmse(test_obs, rig.test_labels)
+        rmse = planner.localizer().loc_rmse(test_obs, rig.test_labels)
         cal = calibration_error(planner.calibration()["theta"], rig.theta_true)
         curve.append({"captures": len(planner.observations), "gantry_seconds": planner.gantry_seconds,
                       "rmse_m": rmse, "calibration_error": cal})

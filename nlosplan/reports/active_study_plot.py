@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from nlosplan.files import write_json, write_text
 from nlosplan.reports.figures import pyplot, save_figure
 from nlosplan.reports.tables import format_table
 
@@ -119,8 +119,7 @@ def write_active(result: dict, out_dir, *, plot=None) -> dict[str, str]:
     out.mkdir(parents=True, exist_ok=True)
     png = Path(plot) if plot else out / "active_vs_raster.png"
     plot_active(result, png)
-    (out / "active_vs_raster.md").write_text(active_markdown(result, png.name if png.parent == out else str(png)),
-                                             encoding="utf-8")
-    (out / "active_vs_raster.json").write_text(json.dumps(result, indent=1, default=float), encoding="utf-8")
+    write_text(out / "active_vs_raster.md", active_markdown(result, png.name if png.parent == out else str(png)))
+    write_json(out / "active_vs_raster.json", result, indent=1, default=float)
     return {"json": str(out / "active_vs_raster.json"), "markdown": str(out / "active_vs_raster.md"),
             "plot": str(png)}

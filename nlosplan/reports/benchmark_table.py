@@ -10,10 +10,11 @@ in metres, accuracies in percent. Formats: a pandas table
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
+
+from nlosplan.files import write_json, write_text
 
 from nlosplan.reports.tables import markdown_table
 
@@ -21,7 +22,7 @@ __all__ = ["benchmark_markdown", "benchmark_table", "benchmark_text", "not_appli
 
 TASK_TITLES = {"loc": "Localization (x, y), metres", "shape": "Shape classification (30-way), %",
                "size": "Size classification (4 in vs 8 in), %"}
-_METRIC_LABELS = {"rmse": "RMSE", "mae": "MAE", "top1_acc": "Top-1", "top5_acc": "Top-5", "macro_f1": "F1",
+_METRIC_LABELS = {"loc_rmse": "RMSE", "mae": "MAE", "top1_acc": "Top-1", "top5_acc": "Top-5", "macro_f1": "F1",
                   "macro_precision": "Precision", "macro_recall": "Recall"}
 
 
@@ -173,7 +174,6 @@ def write_benchmark(result: dict, out_dir) -> dict[str, str]:
         ``{"csv": path, "markdown": path, "json": path}``.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     table = benchmark_table(result)
     flat = pd.DataFrame(table.to_numpy(), index=table.index, columns=["/".join(c) for c in table.columns])
     runs = runs_table(result)
@@ -181,7 +181,7 @@ def write_benchmark(result: dict, out_dir) -> dict[str, str]:
         r = runs[runs["task"] == task].set_index("model")
         flat[f"{task}/train_seconds"] = [r["train_seconds"].get(m) for m in flat.index]
     paths = {"csv": out / "benchmark.csv", "markdown": out / "benchmark.md", "json": out / "benchmark.json"}
-    flat.to_csv(paths["csv"], index_label="model")
-    paths["markdown"].write_text(benchmark_markdown(result), encoding="utf-8")
-    paths["json"].write_text(json.dumps(result, indent=2, default=float), encoding="utf-8")
+    write_text(paths["csv"], flat.to_csv(index_label="model"))
+    write_text(paths["markdown"], benchmark_markdown(result))
+    write_json(paths["json"], result, indent=2, default=float)
     return {k: str(v) for k, v in paths.items()}

@@ -32,7 +32,8 @@ def plot_tradeoffs(summary: dict, requirement: str, path) -> Path:
     """Metric against each design parameter for one requirement; one line per zone layout where scanned.
 
     Solid: trained model (interval as error bars); dashed: the bound (CRLB or
-    ideal observer); crosses: screened out by the bound; grey line: the requirement.
+    ideal observer); crosses: screened out by the bound; pluses: not met by implication (a costlier design of
+    the line is not met, on an axis the metric is monotone in); grey line: the requirement.
     """
     plt = pyplot()
     curves = [c for c in summary["curves"] if c["requirement"] == requirement]
@@ -58,6 +59,9 @@ def plot_tradeoffs(summary: dict, requirement: str, path) -> Path:
             bd = [(p["x"], p["bound"]) for p in pts if p["bound"] is not None and math.isfinite(p["bound"])]
             if bd:
                 ax.plot(*zip(*bd), color=col, ls="--", lw=1.0, alpha=0.8)
+            imp = [p["x"] for p in pts if p.get("implied")]
+            if imp:
+                ax.plot(imp, [thr] * len(imp), "+", color=col, ms=7)
             scr = [p["x"] for p in pts if p["screened"]]
             if scr:
                 y0 = [thr] * len(scr)
@@ -74,7 +78,7 @@ def plot_tradeoffs(summary: dict, requirement: str, path) -> Path:
     for ax in list(axs.flat)[len(axes):]:
         ax.axis("off")
     fig.suptitle(f"{requirement}: trained model (solid, 95 % interval), bound (dashed), "
-                 "screened out (x), requirement (dotted)", fontsize=9)
+                 "screened out (x), implied not met (+), requirement (dotted)", fontsize=9)
     return save_figure(fig, path, tight=True)
 
 

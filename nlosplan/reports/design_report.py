@@ -1,10 +1,13 @@
 """The design report: ``report.md``, a self-contained ``report.html`` and the PNG plots beside them.
 
-The first screen answers the question: for each task, the cheapest design
-that meets its requirement (with its metric, interval and margin), then the
-minimum requirement per parameter. Below: the trade-off curves, Pareto
-fronts, the evaluators' error against run time and the bound-to-trained gap,
-failures and unreachable designs, the stability catalog and provenance.
+The first screen answers the question: for each requirement, its verdict
+(met / not met / undecided), the cheapest design that meets it (with its
+metric, interval, margin and the worlds it holds in) and why, then the
+minimum requirement per parameter. Below: the metric definitions, the
+learners, the worlds (what would change the answer), the trade-off curves,
+Pareto fronts, the evaluators' error against run time and the
+bound-to-trained gap, failures and unreachable designs, the stability
+catalog and provenance.
 """
 
 from __future__ import annotations
@@ -17,19 +20,23 @@ from pathlib import Path
 
 import pandas as pd
 
+from nlosplan.files import write_text
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
 from nlosplan.reports.tables import format_table, markdown_table
 
-__all__ = ["write_design_report", "requirements_table", "answer_table", "minimum_hardware_text"]
+__all__ = ["write_design_report", "requirements_table", "answer_table", "minimum_hardware_text", "learners_table",
+           "worlds_table"]
 
-_PARAM_FMT = {
-    "zones": lambda v: {1: "1x1", 4: "2x2", 9: "3x3", 16: "4x4", 64: "8x8"}.get(round(v), f"{v:g} zones"),
-    "bin_factor": lambda v: f"{v:.0f} ps",
+_PARAM_FMT = {  # user units (summary.PARAMETERS): zones are already "RxC"
+    "zones": str,
+    "bin_width_ps": lambda v: f"{v:.0f} ps",
     "n_bins": lambda v: f"{v:.0f}",
     "jitter_fwhm_ps": lambda v: f"{v:.0f} ps",
     "pulse_fwhm_ps": lambda v: f"{v:.0f} ps",
     "photon_fraction": lambda v: f"{v:.3g}x",
 }
+#: How the verdicts read in tables ("NO" and "yes" are coloured in the HTML).
+_VERDICT_TEXT = {"met": "yes", "not met": "NO", "undecided": "undecided"}
 
 
 def _fmt_metric(task: str, v) -> str:
@@ -38,49 +45,97 @@ def _fmt_metric(task: str, v) -> str:
     return f"{100 * v:.1f} cm" if task == "loc" else f"{100 * v:.1f} %"
 
 
-def _design_text(d: dict | None, ref_bin_ps: float) -> str:
+def _design_text(d: dict | None, ref_bin_ps: float | None = None) -> str:
     if not d:
         return "none in the space"
-    return (f"{d['zones']} zones, {d['n_bins']} bins of {d['bin_factor'] * ref_bin_ps:.0f} ps, jitter "
+    return (f"{d['zones']} zones, {d['n_bins']} bins of {d['bin_width_ps']:.0f} ps, jitter "
             f"{d['jitter_fwhm_ps']:.0f} ps, pulse +{d['pulse_fwhm_ps']:.0f} ps, {d['photon_fraction']:.3g}x photons")
 
 
-def answer_table(summary: dict, ref_bin_ps: float) -> pd.DataFrame:
-    """One row per requirement: the cheapest design meeting it, its metric with interval, margin, cost, source."""
+def _worlds_text(c: dict) -> str:
+    w = c.get("worlds")
+    if not w:
+        return "n/a"
+    return f"{w['met']} of {w['worlds']} (needs {w['needed']})"
+
+
+def answer_table(summary: dict, ref_bin_ps: float | None = None) -> pd.DataFrame:
+    """One row per requirement: verdict, cheapest design, metric with interval, worlds held, margin, cost, why."""
     rows = []
     for c in summary["cheapest"]:
         task = c["task"]
         ok = c["design"] is not None
-        rows.append({"requirement": c["requirement"], "met": "yes" if ok else "NO",
-                     "cheapest design": _design_text(c["design"], ref_bin_ps),
+        rows.append({"requirement": c["requirement"], "met": _VERDICT_TEXT[c["verdict"]],
+                     "cheapest design": _design_text(c["design"]) if ok else "none in the space",
                      "metric [95 % interval]": (f"{_fmt_metric(task, c['value'])} [{_fmt_metric(task, c['lo'])}, "
                                                 f"{_fmt_metric(task, c['hi'])}]") if ok else "n/a",
+                     "worlds held": _worlds_text(c),
                      "margin": f"{100 * c['margin']:+.0f} %" if ok else "n/a",
-                     "cost": f"{c['cost']:.2f}" if ok else "n/a", "from": c["source"]})
+                     "cost": f"{c['cost']:.2f}" if ok else "n/a", "learner": c["learner"],
+                     "from": c["source"], "why": c["decision"]})
     return pd.DataFrame(rows)
 
 
 def requirements_table(summary: dict) -> pd.DataFrame:
-    """One row per (requirement, parameter): least hardware along that axis, interval, note."""
+    """One row per (requirement, parameter): verdict, least hardware along that axis, interval, note."""
     rows = []
     for r in summary["requirements"]:
         kind = "minimum" if "minimum" in r else "maximum"
         fmt = _PARAM_FMT[r["parameter"]]
         v = r[kind]
-        rows.append({"requirement": r["requirement"], "parameter": r["label"],
-                     "least hardware": f"{kind[:3]} {fmt(v)}" if v is not None else "not met",
+        rows.append({"requirement": r["requirement"], "parameter": r["label"], "verdict": r["verdict"],
+                     "least hardware": f"{kind[:3]} {fmt(v)}" if v is not None else
+                     ("undecided" if r["verdict"] == "undecided" else "not met"),
                      "95 % interval": (f"{fmt(r['interval'][0])} - {fmt(r['interval'][1])}"
                                        if r["interval"] else ""),
                      "note": r["note"]})
     return pd.DataFrame(rows)
 
 
-def minimum_hardware_text(summary: dict, ref_bin_ps: float) -> str:
-    """The terminal table: the answer per task, then the per-parameter requirements."""
-    a = answer_table(summary, ref_bin_ps)
+def learners_table(summary: dict) -> pd.DataFrame:
+    """Every candidate learner on the reference design, per task, and which one the run used."""
+    rows = []
+    for r in summary.get("learners", []):
+        task = r["task"]
+        rows.append({"task": task, "model": r["model"], "used": "yes" if r["chosen"] else "",
+                     "metric [95 % interval]": (f"{_fmt_metric(task, r['value'])} [{_fmt_metric(task, r['lo'])}, "
+                                                f"{_fmt_metric(task, r['hi'])}]") if r["value"] is not None else "n/a",
+                     "seeds": r["seeds"], "s per run": (f"{r['seconds_per_run']:.1f}"
+                                                        if r["seconds_per_run"] is not None else "n/a")})
+    return pd.DataFrame(rows)
+
+
+def worlds_table(summary: dict) -> pd.DataFrame:
+    """Per requirement, each candidate examined in the worlds: held in, needed, what would change the answer."""
+    rows = []
+    for r in (summary.get("worlds") or {}).get("candidates", []):
+        rows.append({"requirement": r["requirement"], "design": _design_text(r["design"]),
+                     "cost": f"{r['cost']:.2f}",
+                     "held in": "n/a" if r.get("met") is None else f"{r['met']} of {r['worlds']}",
+                     "needed": r["needed"], "holds": "yes" if r["holds"] else "NO",
+                     "what would change this answer": r["breaks"]})
+    return pd.DataFrame(rows)
+
+
+def world_parameters_table(summary: dict) -> pd.DataFrame:
+    """The drawn worlds: one row per world, one column per parameter."""
+    w = summary.get("worlds") or {}
+    return pd.DataFrame([{"world": x["world"], **{k: f"{v:.4g}" for k, v in x["parameters"].items()}}
+                         for x in w.get("worlds", [])])
+
+
+def _definitions_text(summary: dict) -> str:
+    return " ".join(f"**{k}**: {v}." for k, v in summary.get("metric_definitions", {}).items())
+
+
+def minimum_hardware_text(summary: dict, ref_bin_ps: float | None = None) -> str:
+    """The terminal table: the verdict and answer per requirement, then the per-parameter requirements."""
+    a = answer_table(summary).drop(columns=["why"])
+    why = "\n".join(f"  {c['requirement']}: {c['verdict']}: {c['decision']}" for c in summary["cheapest"])
     r = requirements_table(summary)
-    return (format_table(a.to_dict("records")) + "\n\nminimum requirement per parameter (others at the reference "
-            f"{summary['reference_sensor']}):\n" + format_table(r.to_dict("records")))
+    return (format_table(a.to_dict("records")) + "\n" + why + "\n\nminimum requirement per parameter (others at the "
+            f"reference {summary['reference_sensor']}):\n" + format_table(r.to_dict("records"))
+            + "\n\nloc_rmse: " + summary["metric_definitions"]["loc_rmse"])
 
 
 def _gap_rows(summary: dict) -> pd.DataFrame:
@@ -99,7 +154,8 @@ def _evaluator_rows(summary: dict) -> pd.DataFrame:
     rows = []
     for e in summary["evaluators"]:
         fid = ", ".join(f"{k}={v}" for k, v in e["fidelity"].items())
-        rows.append({"evaluator": e["evaluator"], "task": e["task"], "evaluations": e["evaluations"],
+        rows.append({"evaluator": e["evaluator"], "task": e["task"], "model": e.get("model", ""),
+                     "evaluations": e["evaluations"],
                      "ok": e["ok"], "unreachable": e["unreachable"], "failed": e["failed"],
                      "median s": f"{e['median_seconds']:.3f}", "total s": f"{e['total_seconds']:.1f}",
                      "median 95 % half-interval": (f"{e['median_half_interval']:.4f}"
@@ -121,21 +177,18 @@ def _disagreement_rows(summary: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _headline(summary: dict, ref_bin_ps: float) -> str:
+def _headline(summary: dict, ref_bin_ps: float | None = None) -> str:
     parts = []
     for c in summary["cheapest"]:
-        if c["design"]:
-            parts.append(f"**{c['requirement']}**: met by {_design_text(c['design'], ref_bin_ps)} "
-                         f"({_fmt_metric(c['task'], c['value'])}, cost {c['cost']:.2f})")
+        if c["verdict"] == "met":
+            held = f", met in {_worlds_text(c)} worlds" if c.get("worlds") else ""
+            parts.append(f"**{c['requirement']}**: met by {_design_text(c['design'])} "
+                         f"({_fmt_metric(c['task'], c['value'])} [{_fmt_metric(c['task'], c['lo'])}, "
+                         f"{_fmt_metric(c['task'], c['hi'])}], cost {c['cost']:.2f}{held})")
+        elif c["verdict"] == "undecided":
+            parts.append(f"**{c['requirement']}**: undecided: {c['decision']}")
         else:
-            text = f"**{c['requirement']}**: no design in the space meets it with the trained models"
-            if c.get("best_trained") is not None:
-                text += f" (best {_fmt_metric(c['task'], c['best_trained'])}"
-                if c.get("bound_meets"):
-                    text += (f"; the bound reaches {_fmt_metric(c['task'], c['best_bound'])}: the model, not the "
-                             "sensor, is what limits it")
-                text += ")"
-            parts.append(text)
+            parts.append(f"**{c['requirement']}**: not met: {c['decision']}")
     return "; ".join(parts) + "."
 
 
@@ -159,26 +212,49 @@ def write_design_report(result: dict, out) -> dict:
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    ref_bin = float(result["reference_bin_ps"])
     plots = {}
     for req in result["requirements_asked"]:
         plots[f"trade-offs: {req}"] = plot_tradeoffs(result, req, out / f"tradeoffs_{_slug(req)}.png")
     plots["Pareto fronts"] = plot_pareto(result, out / "pareto.png")
     plots["evaluators: error against run time"] = plot_evaluators(result, out / "evaluators.png")
     prov = result["provenance"]
-    answer, reqs = answer_table(result, ref_bin), requirements_table(result)
+    answer, reqs = answer_table(result), requirements_table(result)
     stab = result.get("stability") or {}
     stab_text = (f"{stab['passed']} of {stab['total']} cases passed in {stab['seconds']:.0f} s"
                  + (f"; FAILED: {', '.join(stab['failed'])}" if stab.get("failed") else "")
                  if stab.get("ran") else stab.get("note", "not run"))
     unreachable = result["unreachable"]
     failures = result["failures"]
+    wsum = result.get("worlds")
     sections = [
-        ("Answer: the cheapest design per task", _headline(result, ref_bin), answer),
+        ("Answer: the cheapest design per task", _headline(result), answer),
         ("Minimum requirement per parameter",
          f"Along each parameter from the reference ({result['reference_sensor']}, the others kept), the least "
          "hardware whose trained model meets the requirement, interpolated between grid points; the interval comes "
-         "from the metric's 95 % interval. 'min' = at least, 'max' = at most.", reqs),
+         "from the metric's 95 % interval (met: its pessimistic end crosses within the range; undecided: only its "
+         "optimistic end does). 'min' = at least, 'max' = at most.", reqs),
+        ("Metrics and verdicts", _definitions_text(result)
+         + f" Intervals: the mean over a design's runs (each a new seed: new Poisson noise, train/test split and "
+           f"training seed) with the run-to-run spread pooled over the designs of the task; "
+           f"{result['budget']['spent']} of {result['budget']['extra_evaluations']} extra evaluations spent deciding "
+           f"(at most {result['budget']['max_seeds']} seeds per design).", pd.DataFrame()),
+        ("Learners on the reference design",
+         "Every candidate model trained on the reference design; the best of each task is the one every design "
+         "of that task is trained with.", learners_table(result)),
+    ]
+    if wsum:
+        sections += [
+            ("Worlds: what would change this answer",
+             f"The cheapest met candidates of each requirement in {wsum['count']} plausible worlds ("
+             + "; ".join(wsum["sources"]) + f"); a design is the minimum hardware when met in at least "
+             f"{wsum['needed']} of them ({100 * wsum['quorum']:.0f} %). Worlds simulate {wsum['scenes_per_world']} "
+             f"scenes each (1 in {wsum['scene_step']} of the run's gantry positions): a world's metric is the verified value shifted by "
+             f"the paired world effect, whose run-to-run variance is {wsum['variance_factor']:.1f}x a run's on the "
+             "full scenes (the cost of fewer scenes in interval width).", worlds_table(result)),
+            ("The worlds drawn", "Each world's parameters (sensor fields and DENALI scene arguments).",
+             world_parameters_table(result)),
+        ]
+    sections += [
         ("Bound-to-trained gap (multi-fidelity)",
          "How far the trained models are from the fast bounds on the designs evaluated by both; the optimizer "
          "screens with the bound corrected by this gap, and the cheapest candidates are verified by training.",
@@ -193,7 +269,8 @@ def write_design_report(result: dict, out) -> dict:
                          f"{len(result['disagreements'])} disagree (95 % intervals apart).", _disagreement_rows(result)))
     md = [f"# nlosplan design — minimum hardware per NLOS task ({result['provenance']['config']['label']} run)", ""]
     for title, text, df in sections:
-        md += [f"## {title}", "", text, "", markdown_table(df) if len(df) else "(none)", ""]
+        md += [f"## {title}", "", text, "", markdown_table(df) if len(df) else ("(none)" if len(df.columns) else ""),
+               ""]
     md += ["## Plots", ""] + [f"![{k}]({Path(v).name})" for k, v in plots.items()] + [""]
     md += ["## Stability catalog (`nlosplan check`)", "", stab_text, ""]
     md += ["## Failed evaluations", "", f"{len(failures)} failed" + (":" if failures else "."), ""]
@@ -201,14 +278,15 @@ def write_design_report(result: dict, out) -> dict:
     md += ["## Unreachable designs", "", f"{len(unreachable)}" + (":" if unreachable else "."), ""]
     md += [f"- {u}" for u in unreachable[:20]] + [""]
     md += ["## Provenance", "", f"- wall time: {prov['wall_seconds']:.1f} s on {prov['cpus']} CPUs ({prov['executor']})",
-           f"- git revision: {prov['git_revision']}; configuration hash {prov['config_hash']}; seeds {prov['seeds']}",
+           f"- git revision: {prov['git_revision']}; configuration hash {prov['config_hash']}; seed {prov['seed']} "
+           f"({prov['seeds']})",
            "- versions: " + ", ".join(f"{k} {v}" for k, v in prov["versions"].items()),
            f"- references: {json.dumps(result['references'])}", "", "```json",
            json.dumps(prov["config"], indent=1), "```", ""]
     md_path = out / "report.md"
-    md_path.write_text("\n".join(md))
+    write_text(md_path, "\n".join(md))
     html_path = out / "report.html"
-    html_path.write_text(_html(result, sections, plots, stab_text, failures, unreachable, prov))
+    write_text(html_path, _html(result, sections, plots, stab_text, failures, unreachable, prov))
     return {"markdown": str(md_path), "html": str(html_path), "plots": {k: str(v) for k, v in plots.items()}}
 
 
@@ -222,7 +300,7 @@ pre{background:#f6f6f6;padding:8px;font-size:11px;overflow:auto}"""
 
 def _df_html(df: pd.DataFrame) -> str:
     if not len(df):
-        return "<p>(none)</p>"
+        return "<p>(none)</p>" if len(df.columns) else ""
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in df.columns)
     body = []
     for row in df.itertuples(index=False):
@@ -256,7 +334,7 @@ def _html(result, sections, plots, stab_text, failures, unreachable, prov) -> st
     parts.append("<h2>Provenance</h2><ul>"
                  f"<li>wall time {prov['wall_seconds']:.1f} s on {prov['cpus']} CPUs ({html.escape(prov['executor'])})</li>"
                  f"<li>git revision {html.escape(prov['git_revision'])}, configuration {prov['config_hash']}, "
-                 f"seeds {prov['seeds']}</li><li>versions: "
+                 f"seed {prov['seed']} ({html.escape(prov['seeds'])})</li><li>versions: "
                  + html.escape(", ".join(f"{k} {v}" for k, v in prov["versions"].items())) + "</li></ul>"
                  f"<pre>{html.escape(json.dumps(prov['config'], indent=1))}</pre>")
     # for headless checks: how many images decoded (the report works without it)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nlosplan.reports.figures import save_figure
+
 
 def plot_fidelity(rows: list[dict], path, *, reference_self_error: float | None = None, title: str = "") -> Path:
     """Log-log relative L1 error (%) against seconds per scene, one line per backend.
@@ -44,9 +46,4 @@ def plot_fidelity(rows: list[dict], path, *, reference_self_error: float | None 
     ax.set_ylim(min(ys_all + [100 * (reference_self_error or 1)]) / 2, max(ys_all) * 2)
     if title:
         ax.set_title(title, fontsize=10)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110, tight=True)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nlosplan.files import atomic_path
+
 
 def pyplot():
     """``matplotlib.pyplot`` on the headless Agg backend (imported only when a figure is drawn)."""
@@ -16,12 +18,15 @@ def pyplot():
 
 
 def save_figure(fig, path: str | Path, *, dpi: int = 110, tight: bool = False) -> Path:
-    """Write ``fig`` as a PNG at ``path`` (folders created), close it, and return the path."""
+    """Write ``fig`` at ``path`` atomically (folders created; the suffix picks the format, e.g. PNG), close it,
+    and return the path."""
     plt = pyplot()
-    if tight:
-        fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+    try:
+        if tight:
+            fig.tight_layout()
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png")
+    finally:
+        plt.close(fig)
     return path

@@ -14,10 +14,11 @@ Markdown, JSON and PNG files. Computes no results.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
+
+from nlosplan.files import write_json, write_text
 
 from nlosplan.reports.benchmark_table import not_applicable
 from nlosplan.reports.figures import pyplot, save_figure
@@ -27,14 +28,14 @@ __all__ = ["METRIC_ORDER", "jitter_markdown", "jitter_table", "jitter_text", "le
            "write_jitter"]
 
 #: Metrics shown per task, in table order (the study's: RMSE/MAE; top-1/top-5/F1; accuracy/precision/recall).
-METRIC_ORDER: dict[str, tuple[str, ...]] = {"loc": ("rmse", "mae"), "shape": ("top1_acc", "top5_acc", "macro_f1"),
+METRIC_ORDER: dict[str, tuple[str, ...]] = {"loc": ("loc_rmse", "mae"), "shape": ("top1_acc", "top5_acc", "macro_f1"),
                                             "size": ("top1_acc", "macro_precision", "macro_recall")}
-_LABELS = {("loc", "rmse"): "loc RMSE m", ("loc", "mae"): "loc MAE m", ("shape", "top1_acc"): "shape top-1 %",
+_LABELS = {("loc", "loc_rmse"): "loc RMSE m", ("loc", "mae"): "loc MAE m", ("shape", "top1_acc"): "shape top-1 %",
            ("shape", "top5_acc"): "shape top-5 %", ("shape", "macro_f1"): "shape F1 %",
            ("size", "top1_acc"): "size acc %", ("size", "macro_precision"): "size prec %",
            ("size", "macro_recall"): "size rec %"}
 #: What each panel of the figure shows: (task, metric, y label, scale to display units).
-PANELS = {"loc": ("rmse", "localization RMSE (cm)", 100.0), "shape": ("top1_acc", "shape top-1 accuracy (%)", 100.0),
+PANELS = {"loc": ("loc_rmse", "localization RMSE (cm)", 100.0), "shape": ("top1_acc", "shape top-1 accuracy (%)", 100.0),
           "size": ("top1_acc", "size accuracy, 4 in vs 8 in (%)", 100.0)}
 _TITLES = {"loc": "Localization", "shape": "Shape ({n}-way)", "size": "Size (4 in vs 8 in)"}
 
@@ -237,7 +238,6 @@ def write_jitter(result: dict, out_dir, *, plot=None) -> dict[str, str]:
         and seconds; the JSON is the whole result.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out / "jitter.csv", "markdown": out / "jitter.md", "json": out / "jitter.json",
              "plot": Path(plot) if plot is not None else out / "jitter.png"}
     table = jitter_table(result)
@@ -245,12 +245,12 @@ def write_jitter(result: dict, out_dir, *, plot=None) -> dict[str, str]:
     lv = levels_table(result).set_index("jitter_ps")
     for col in ("n_rows", "peak_counts", "peak_width_ps", "train_seconds", "seconds"):
         flat[col] = [lv[col].get(v) for v in flat.index]
-    flat.to_csv(paths["csv"], index_label="jitter_ps")
+    write_text(paths["csv"], flat.to_csv(index_label="jitter_ps"))
     plot_jitter(result, paths["plot"])
     try:
         figure = str(Path(paths["plot"]).resolve().relative_to(out.resolve()))
     except ValueError:
         figure = str(Path(paths["plot"]).resolve())
-    paths["markdown"].write_text(jitter_markdown(result, figure=figure), encoding="utf-8")
-    paths["json"].write_text(json.dumps(result, indent=2, default=float), encoding="utf-8")
+    write_text(paths["markdown"], jitter_markdown(result, figure=figure))
+    write_json(paths["json"], result, indent=2, default=float)
     return {k: str(v) for k, v in paths.items()}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -56,10 +55,6 @@ def plot_plane_residuals(runs: dict, path, *, metric: str = "subbin_err", rows: 
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(title or f"{label}: grey band = target", fontsize=10)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    from nlosplan.reports.figures import save_figure
+
+    return save_figure(fig, path, dpi=110)

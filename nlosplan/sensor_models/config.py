@@ -282,64 +282,59 @@ class SensorConfig:
         except TypeError as exc:  # pragma: no cover - defensive
             raise UserError(f"invalid sensor configuration: {exc}") from None
 
-    def to_json(self) -> str:
-        """JSON text of :meth:`to_dict`."""
-        return json.dumps(self.to_dict(), indent=2)
+    def to_json(self, base: str | None = None) -> str:
+        """JSON text of :meth:`to_dict` (with ``base`` first when given: see :func:`~nlosplan.sensor_models.presets.load_sensor_file`)."""
+        data = self.to_dict() if base is None else {"base": base, **self.to_dict()}
+        return json.dumps(data, indent=2)
 
     @classmethod
     def from_json(cls, text: str) -> "SensorConfig":
-        """Parse JSON text written by :meth:`to_json`."""
+        """Parse JSON text written by :meth:`to_json` (every field; missing ones take the class defaults)."""
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise UserError(f"sensor JSON is not valid JSON: {exc.msg} at line {exc.lineno}") from None
         return cls.from_dict(data)
 
-    def to_toml(self) -> str:
-        """TOML text of :meth:`to_dict` (unset optional fields such as ``pulse_shape`` omitted)."""
+    def to_toml(self, base: str | None = None) -> str:
+        """TOML text of :meth:`to_dict` (unset optional fields such as ``pulse_shape`` omitted; ``base`` first when
+        given)."""
         import tomli_w
 
         data = {k: v for k, v in self.to_dict().items() if v is not None}
+        if base is not None:
+            data = {"base": base, **data}
         return tomli_w.dumps(data)
 
     @classmethod
     def from_toml(cls, text: str) -> "SensorConfig":
-        """Parse TOML text written by :meth:`to_toml`."""
+        """Parse TOML text written by :meth:`to_toml` (every field; missing ones take the class defaults)."""
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise UserError(f"sensor TOML is not valid TOML: {exc}") from None
         return cls.from_dict(data)
 
-    def save(self, path: str | Path) -> None:
-        """Write to ``.toml`` or ``.json`` chosen by the file suffix."""
+    def save(self, path: str | Path, base: str | None = None) -> None:
+        """Write every field to ``.toml`` or ``.json`` (chosen by the suffix), atomically.
+
+        Parameters
+        ----------
+        path : str or Path
+        base : str, optional
+            The preset this sensor refines, written as ``base`` so that fields
+            added to the model later take the preset's values (see
+            :func:`~nlosplan.sensor_models.presets.load_sensor_file`).
+        """
+        from nlosplan.files import write_text
+
         path = Path(path)
         if path.suffix == ".toml":
-            path.write_text(self.to_toml())
+            write_text(path, self.to_toml(base))
         elif path.suffix == ".json":
-            path.write_text(self.to_json())
+            write_text(path, self.to_json(base))
         else:
             raise UserError(f"sensor file {path} must end in .toml or .json")
-
-    @classmethod
-    def load(cls, path: str | Path) -> "SensorConfig":
-        """Read a ``.toml`` or ``.json`` sensor file.
-
-        Raises
-        ------
-        UserError
-            If the file cannot be read or holds an invalid configuration.
-        """
-        path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise UserError(f"cannot read sensor file {path}: {exc.strerror}") from None
-        if path.suffix == ".toml":
-            return cls.from_toml(text)
-        if path.suffix == ".json":
-            return cls.from_json(text)
-        raise UserError(f"sensor file {path} must end in .toml or .json")
 
 
 def _check(cond: bool, message: str) -> None:

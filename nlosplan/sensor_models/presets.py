@@ -13,7 +13,8 @@ Sources
   (``nlosplan calibrate``, :mod:`nlosplan.calibration.plane_fit`):
   per-zone time offsets, time scales, gains and near-field overlap, first-photon
   pile-up at the captures' iterations, time walk, pulse with its tail. Values of
-  that one unit (:data:`PLANE_UNIT`), given to ``tmf8828-3x3-short`` only.
+  that one unit (:data:`PLANE_UNIT`), in the preset ``tmf8828-3x3-plane-unit``
+  only (another TMF8828, DENALI's among them, has its own).
 - DRV: the DENALI / cc-hardware driver constant for long range (260 ps bins).
 - ST: ST UM3183 and the cc-hardware VL53L8CH driver (compact normalised
   histograms: bins of ~37.5 mm = 250 ps, up to 32 bins, pulse ~10 bins wide).
@@ -23,8 +24,12 @@ Where a value has no source it is marked "assumed" in the preset's notes.
 
 from __future__ import annotations
 
-from nlosplan.errors import UserError
-from nlosplan.sensor_models.config import SensorConfig
+import dataclasses
+from pathlib import Path
+
+from nlosplan.errors import UserError, check_keys
+from nlosplan.schema import load_table
+from nlosplan.sensor_models.config import ZONE_FIELDS, SensorConfig
 
 #: Values measured from ../shared/data/tmf882x_distance (TMF882x, 3x3, short
 #: range). Regenerate with ``nlosplan sensor fit-timebase PATH``.
@@ -162,9 +167,9 @@ def _vl53l8ch() -> SensorConfig:
 
 
 def _plane_unit_3x3() -> SensorConfig:
-    """The 3x3 short-range preset: the plane unit's fitted values (UNIT) on the DS geometry."""
+    """The plane captures' unit: the 3x3 short-range preset with that unit's fitted values (UNIT)."""
     u = PLANE_UNIT
-    base = _tmf8828_short(3, 3, (33.0, 32.0), u["iterations"], "tmf8828-3x3-short")
+    base = _tmf8828_short(3, 3, (33.0, 32.0), u["iterations"], "tmf8828-3x3-plane-unit")
     notes = PLANE_UNIT_NOTES.format(iterations=f"{u['iterations'] / 1e6:.2f}M", walk=f"{u['time_walk_ps']:g}",
                                     scores=PLANE_UNIT_SCORES)
     return base.replace(
@@ -182,7 +187,8 @@ def _plane_unit_3x3() -> SensorConfig:
 
 def _builders() -> dict:
     return {
-        "tmf8828-3x3-short": _plane_unit_3x3,
+        "tmf8828-3x3-short": lambda: _tmf8828_short(3, 3, (33.0, 32.0), 550_000, "tmf8828-3x3-short"),
+        "tmf8828-3x3-plane-unit": _plane_unit_3x3,
         "tmf8828-4x4-short": lambda: _tmf8828_short(4, 4, (41.0, 52.0), 550_000, "tmf8828-4x4-short"),
         "tmf8828-8x8-short": lambda: _tmf8828_short(8, 8, (41.0, 52.0), 125_000, "tmf8828-8x8-short"),
         "tmf8828-3x3-long": _tmf8828_3x3_long,
@@ -217,11 +223,93 @@ def preset(name: str) -> SensorConfig:
     return builders[name]()
 
 
+#: Fields a complete sensor file may leave out: the labels, and the optional terms whose unset value (None) means
+#: "not modelled" (a measured pulse shape, per-zone terms, dead time), never a generic number.
+OPTIONAL_FILE_FIELDS = ("name", "notes") + tuple(f.name for f in dataclasses.fields(SensorConfig) if f.default is None)
+
+
+def load_sensor_file(path) -> SensorConfig:
+    """Read a ``.toml`` or ``.json`` sensor file: its ``base`` preset with the fields it gives, or every field.
+
+    A file either names the preset it refines (``base = "tmf8828-3x3-short"``;
+    the fields it gives replace the preset's, so fields added to the model
+    later take the preset's values) or gives every field but
+    :data:`OPTIONAL_FILE_FIELDS`. Nothing is filled in silently: an empty or
+    partial file without ``base``, an unknown or missing field and a wrong
+    type are errors naming the file and the field.
+
+    Raises
+    ------
+    UserError
+        The file cannot be read as text or does not parse, or its
+        configuration is incomplete or invalid (one line).
+    """
+    path = Path(path)
+    data = load_table(path, "sensor file")
+    try:
+        return _from_table(data, path)
+    except UserError as exc:
+        raise UserError(f"sensor file {path}: {exc}") from None
+
+
+def _from_table(data: dict, path: Path) -> SensorConfig:
+    fields = sorted(f.name for f in dataclasses.fields(SensorConfig))
+    data = dict(data)
+    base = data.pop("base", None)
+    check_keys(data, ["base", *fields], "field(s)")
+    for name in ("pulse_shape",) + ZONE_FIELDS:
+        if isinstance(data.get(name), list):
+            data[name] = tuple(data[name])
+    if base is not None:
+        if not isinstance(base, str) or base not in PRESET_NAMES:
+            raise UserError(f"base = {base!r} is not a sensor preset; allowed: {', '.join(PRESET_NAMES)}")
+        data.setdefault("name", f"{path.stem} ({base})")
+        return preset(base).replace(**data)
+    missing = [f for f in fields if f not in data and f not in OPTIONAL_FILE_FIELDS]
+    if missing:
+        what = "is empty" if not data else f"misses {', '.join(missing)}"
+        raise UserError(f"the file {what}; name the preset it refines (e.g. base = \"{PRESET_NAMES[0]}\"; "
+                        f"presets: {', '.join(PRESET_NAMES)}) or give every field")
+    data.setdefault("name", path.stem)
+    return SensorConfig(**data)
+
+
+def sensor_base(spec) -> str | None:
+    """The preset a sensor spec refines: the preset's own name, a sensor file's ``base``, else None."""
+    if isinstance(spec, SensorConfig):
+        return spec.name if spec.name in PRESET_NAMES and spec == preset(spec.name) else None
+    spec = str(spec)
+    if spec.endswith((".toml", ".json")):
+        base = load_table(spec, "sensor file").get("base")
+        return base if isinstance(base, str) and base in PRESET_NAMES else None
+    return spec if spec in PRESET_NAMES else None
+
+
+def uncertainty(name: str) -> dict | None:
+    """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
+    :mod:`nlosplan.sensor_models.uncertainty`), or None.
+
+    No preset ships one today: their measured values carry line-fit errors
+    only (:data:`MEASURED`), not a calibration's joint uncertainty. The design
+    planner's worlds then draw only from their declared ranges.
+
+    Raises
+    ------
+    UserError
+        For an unknown preset name.
+    """
+    if name not in _builders():
+        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(_builders())}")
+    return None
+
+
 def resolve_sensor(spec) -> SensorConfig:
     """A preset name or a path to a ``.toml``/``.json`` sensor file (a :class:`SensorConfig` is returned as it is)."""
     if isinstance(spec, SensorConfig):
         return spec
     spec = str(spec)
     if spec.endswith((".toml", ".json")):
-        return SensorConfig.load(spec)
+        return load_sensor_file(spec)
+    if spec not in PRESET_NAMES and Path(spec).exists():
+        raise UserError(f"sensor file {spec} must end in .toml or .json (or give a preset: {', '.join(PRESET_NAMES)})")
     return preset(spec)

@@ -96,7 +96,7 @@ def _check_axes(axes) -> np.ndarray:
 
 
 def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nuisance=("photon_scale",), axes=None,
-                        zones=None, theta=None, chunk: int = 25):
+                        zones=None, theta=None, chunk: int = 25, progress=None):
     """Expected counts and their derivatives with respect to position and nuisance parameters.
 
     Parameters
@@ -116,6 +116,8 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nui
         Evaluate at this displacement (metres) and these log-changes (default 0: the scene as given).
     chunk : int
         Scenes per compiled call.
+    progress : callable, optional
+        ``progress(done, total)`` in scenes after each compiled call.
 
     Returns
     -------
@@ -145,6 +147,8 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", nui
         keep = min(sim.chunk, n - start)
         lams.append(np.asarray(lam)[:keep])
         jacs.append(np.asarray(jac)[:keep])
+        if progress is not None:
+            progress(start + keep, n)
     return np.concatenate(lams), np.concatenate(jacs), ("x", "y") + tuple(f"log_{m}" for m in names), sim
 
 
@@ -213,6 +217,16 @@ class CRLBResult:
     notes: tuple = ()
 
     @property
+    def loc_rmse_bound_m(self) -> float:
+        """Bound on DENALI's pooled ``loc_rmse`` (metres): ``sqrt((var_0 + var_1) / 2)`` = ``rmse_bound_m / sqrt(2)``.
+
+        ``rmse_bound_m`` bounds the 2-D RMS distance (the covariance's trace is a
+        2-D mean square); ``loc_rmse`` averages over the x and y entries, so the
+        trace is halved under the root before the two are compared.
+        """
+        return self.rmse_bound_m / math.sqrt(2.0)
+
+    @property
     def nuisance_price(self) -> float:
         """``rmse_bound_m / rmse_bound_known_m`` (>= 1): the cost of estimating the nuisances."""
         if not (math.isfinite(self.rmse_bound_m) and self.rmse_bound_known_m > 0):
@@ -244,8 +258,9 @@ class CRLBBatchResult:
     ----------
     results : list of CRLBResult
     rms_bound_m : float
-        ``sqrt(mean_s rmse_bound_m(s)^2)``: the bound on a model's RMSE over
-        these scenes (``inf`` if any scene's position is not identifiable).
+        ``sqrt(mean_s rmse_bound_m(s)^2)``: the bound on a model's 2-D RMS distance
+        error over these scenes (``inf`` if any scene's position is not
+        identifiable); :attr:`loc_rmse_bound_m` bounds DENALI's pooled RMSE.
     rms_bound_known_m : float
         The same with the nuisance parameters known.
     unidentifiable : list of int
@@ -263,6 +278,11 @@ class CRLBBatchResult:
     seconds: float
     fidelity: str
     knobs: dict
+
+    @property
+    def loc_rmse_bound_m(self) -> float:
+        """Bound on DENALI's pooled ``loc_rmse`` over these scenes: ``rms_bound_m / sqrt(2)`` (see :class:`CRLBResult`)."""
+        return self.rms_bound_m / math.sqrt(2.0)
 
     def summary(self) -> str:
         """One line."""
@@ -283,7 +303,7 @@ def _rmse(cov) -> tuple[float, np.ndarray]:
 
 def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default", repeats: int = 1,
                             nuisance=("photon_scale",), axes=None, zones=None, cond_max: float = COND_MAX,
-                            chunk: int = 25) -> CRLBBatchResult:
+                            chunk: int = 25, progress=None) -> CRLBBatchResult:
     """Cramér–Rao bounds on localization for many scenes with one compiled simulator.
 
     Parameters
@@ -308,6 +328,8 @@ def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default",
         Condition-number threshold of the equilibrated Fisher matrix.
     chunk : int
         Scenes per compiled call.
+    progress : callable, optional
+        ``progress(done, total)`` in scenes as the Jacobians are computed.
 
     Returns
     -------
@@ -327,7 +349,7 @@ def localization_crlb_batch(scenes, sensor: SensorConfig, *, fidelity="default",
     if not scenes:
         raise UserError("give at least one scene")
     lam, jac, names, sim = counts_and_jacobian(scenes, sensor, fidelity=fidelity, nuisance=nuisance, axes=axes,
-                                               zones=zones, chunk=chunk)
+                                               zones=zones, chunk=chunk, progress=progress)
     fisher = poisson_fisher(lam.reshape(len(scenes), -1), jac.reshape(len(scenes), -1, len(names)), repeats)
     per_scene = (time.perf_counter() - t0) / len(scenes)
     fid = sim.plan.fidelity

@@ -11,13 +11,13 @@ that needs Python's pickle to load, so :func:`load_checkpoint` reads it with
 from __future__ import annotations
 
 import json
-import os
 import pickle
 from pathlib import Path
 
 import torch
 
 from nlosplan.errors import UserError
+from nlosplan.files import atomic_path
 from nlosplan.tasks.models import ModelSpec, model_from_spec
 from nlosplan.tasks.training_types import Preprocessing, TrainConfig, TrainedModel
 
@@ -46,20 +46,12 @@ def save_checkpoint(path, trained) -> Path:
         ``path``.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"format": CHECKPOINT_FORMAT,
                "state_dict": {k: v.detach().cpu().clone() for k, v in trained.model.state_dict().items()},
                "meta_json": json.dumps(trained.meta())}
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             torch.save(payload, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -167,7 +167,7 @@ def _draw_plan(rng, class_of, n_pos, draws):
 
 def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bool = False, rule: str = "marginal",
                       same_group=None, noise: bool = True, max_count: int | None = None, confidence: float = 0.95,
-                      ci_method: str = "wilson", class_names=None, chunk_bytes: int = 1 << 27) -> dict:
+                      ci_method: str = "wilson", class_names=None, chunk_bytes: int = 1 << 27, progress=None) -> dict:
     """Monte-Carlo accuracy of the ideal observer on precomputed expected counts.
 
     Parameters
@@ -198,7 +198,9 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         See :func:`binomial_interval`.
     class_names : sequence of str, optional
     chunk_bytes : int
-        Memory for the (draws x H*P) log-likelihood block of one chunk.
+        Memory for one chunk's (draws x H*P) log-likelihood block and its (draws x D) noisy captures.
+    progress : callable, optional
+        ``progress(done, total)`` in noisy captures after each chunk.
 
     Returns
     -------
@@ -237,7 +239,8 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     total -= total.mean()
     members = [np.flatnonzero(class_of == c) for c in range(n_c)]
     decision = np.empty(truth_h.size, np.int64)
-    step = max(1, int(chunk_bytes // (8 * n_h * n_p)))
+    # a chunk's (draws x H*P) log-likelihoods and its (draws x D) captures both fit in chunk_bytes
+    step = max(1, int(chunk_bytes // (8 * max(n_h * n_p, log_lam.shape[1]))))
     for start in range(0, truth_h.size, step):
         th, tp = truth_h[start:start + step], truth_p[start:start + step]
         y = lam[th, tp]
@@ -265,6 +268,8 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         best = score.max(axis=1, keepdims=True)
         tied = score >= best - TIE_NATS
         decision[start:start + step] = np.argmax(np.where(tied, rng.random(score.shape), -1.0), axis=1)
+        if progress is not None:
+            progress(min(start + step, truth_h.size), truth_h.size)
     truth = class_of[truth_h]
     confusion = np.zeros((n_c, n_c), np.int64)
     np.add.at(confusion, (truth, decision), 1)
@@ -290,7 +295,7 @@ def ideal_observer(task: str, sensor: SensorConfig, *, objects=None, size: str =
                    lights: str = "off", position_known: bool = False, rule: str = "marginal",
                    shape_known: bool = False, draws: int = 100, seed: int = 0, fidelity="default",
                    confidence: float = 0.95, ci_method: str = "wilson", noise: bool = True,
-                   scene_kw: dict | None = None) -> IdealObserverResult:
+                   scene_kw: dict | None = None, progress=None) -> IdealObserverResult:
     """Ideal-observer accuracy for DENALI shape or size classification.
 
     Parameters
@@ -327,6 +332,8 @@ def ideal_observer(task: str, sensor: SensorConfig, *, objects=None, size: str =
         Poisson captures (True) or noise-free ``y = lam`` (a check).
     scene_kw : dict, optional
         More arguments of :func:`~nlosplan.simulators.denali_scene` (e.g. ``mount=True``).
+    progress : callable, optional
+        ``progress(stage, done, total)``: ``"simulation"`` (scenes, once done) then ``"draws"`` (noisy captures).
 
     Returns
     -------
@@ -362,9 +369,12 @@ def ideal_observer(task: str, sensor: SensorConfig, *, objects=None, size: str =
     sim = FastSimulator(scenes, sensor, fidelity=fidelity, dtype="float64")
     means = np.asarray(sim.expected()).reshape(len(hyps), len(pos), -1)
     t_sim = time.perf_counter() - t0
+    if progress is not None:
+        progress("simulation", len(scenes), len(scenes))
     out = observer_accuracy(means, class_of, draws=draws, seed=seed, position_known=position_known, rule=rule,
                             same_group=group, noise=noise, max_count=sensor.max_count if sensor.saturation else None,
-                            confidence=confidence, ci_method=ci_method, class_names=class_names)
+                            confidence=confidence, ci_method=ci_method, class_names=class_names,
+                            progress=None if progress is None else (lambda d, t: progress("draws", d, t)))
     fid = sim.plan.fidelity
     meta = {"sensor": sensor.name, "lights": lights, "size": size if task == "shape" else list(SIZES),
             "objects": objs, "positions": pos, "shape_known": bool(shape_known) if task == "size" else None,

@@ -10,20 +10,24 @@ Used by the benchmark (:mod:`nlosplan.tasks.benchmark`), the jitter study
   sklearn macro F1 / precision / recall (``zero_division=0``) over the
   classes present in the targets or predictions;
 - localization: errors of (x, y) in metres, pooled over both coordinates:
-  ``rmse = sqrt(mean((pred - true)**2))`` and ``mae = mean(|pred - true|)``
-  over the N x 2 entries (not the Euclidean distance), plus per-axis MSE/MAE.
+  ``loc_rmse = sqrt(mean((pred - true)**2))`` (DENALI's ``rmse``) and
+  ``mae = mean(|pred - true|)`` over the N x 2 entries (not the Euclidean
+  distance), plus per-axis MSE/MAE.
 
-One more localization figure, not DENALI's, under its own name:
+``loc_rmse`` is the one localization metric of nlosplan: the benchmark
+table, the studies, the design planner's requirements (``loc<=X``), the
+rig's ``--target-rmse`` and the Cramér–Rao comparison all use it
+(:data:`METRIC_DEFINITIONS` states it once for help texts, reports and
+JSON). One more localization figure, not DENALI's, under its own name:
 :func:`loc_rms_distance`, the RMS of the 2-D Euclidean error
-``sqrt(mean(|pred - true|^2))`` (= sqrt(2) x the pooled ``rmse``), which the
-design planner's requirements are stated in today.
+``sqrt(mean(|pred - true|^2))`` (= sqrt(2) x ``loc_rmse``).
 
 Breakdowns (the paper's table)
 ------------------------------
 ===========  ========================  =======================================
 task         metrics                   groups
 ===========  ========================  =======================================
-loc          rmse, mae                 all; size; class group
+loc          loc_rmse, mae             all; size; class group
 shape        top1, top5, macro F1      all; near/far quadrant; size
 size         precision, recall, acc.   all; near/far quadrant; class group
 ===========  ========================  =======================================
@@ -48,16 +52,16 @@ import math
 
 import numpy as np
 import pandas as pd
-from sklearn.metrics import f1_score, precision_score, recall_score
 
 from nlosplan.errors import UserError
 
-__all__ = ["BREAKDOWNS", "METRICS", "breakdown_rows", "classification_metrics", "loc_rms_distance",
-           "position_quadrants", "regression_metrics", "top1_accuracy"]
+__all__ = ["BREAKDOWNS", "METRICS", "METRIC_DEFINITIONS", "breakdown_rows", "classification_metrics", "loc_rmse",
+           "loc_rms_distance", "position_quadrants", "regression_metrics", "top1_accuracy"]
 
-#: Metrics shown per task, in table order (DENALI's key names; size accuracy is ``top1_acc``).
+#: Metrics shown per task, in table order (DENALI's key names, but ``loc_rmse`` for its ``rmse``; size accuracy
+#: is ``top1_acc``).
 METRICS: dict[str, tuple[str, ...]] = {
-    "loc": ("rmse", "mae"),
+    "loc": ("loc_rmse", "mae"),
     "shape": ("top1_acc", "top5_acc", "macro_f1"),
     "size": ("macro_precision", "macro_recall", "top1_acc"),
 }
@@ -66,6 +70,16 @@ BREAKDOWNS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
     "loc": (("size", ("4in", "8in")), ("class_group", ("numbers", "letters", "shapes"))),
     "shape": (("quadrant", ("near", "far")), ("size", ("4in", "8in"))),
     "size": (("quadrant", ("near", "far")), ("class_group", ("numbers", "letters", "shapes"))),
+}
+
+
+#: Each metric's definition, stated once: help texts, reports and JSON (``metric_definitions``) print these.
+METRIC_DEFINITIONS: dict[str, str] = {
+    "loc_rmse": ("localization RMSE, metres, DENALI's: sqrt of the mean of the squared x and y errors pooled over "
+                 "the N x 2 entries, sqrt(mean((pred - true)**2))"),
+    "loc_rms_distance": ("RMS of the 2-D Euclidean localization error, metres: sqrt(mean_i |pred_i - true_i|^2) "
+                         "= sqrt(2) x loc_rmse (not DENALI's; shown where a distance is meant)"),
+    "top1_acc": "top-1 accuracy, fraction of test captures whose highest-scoring class is the true one",
 }
 
 
@@ -82,12 +96,30 @@ def top1_accuracy(scores, targets) -> float:
     return float((np.argmax(scores, axis=1) == np.asarray(targets)).mean())
 
 
+def loc_rmse(predictions, targets) -> float:
+    """DENALI's localization RMSE, metres: ``sqrt(mean((pred - true)**2))`` over the N x 2 (x, y) entries.
+
+    Parameters
+    ----------
+    predictions, targets : array_like, shape (N, 2)
+        (x, y) in metres.
+
+    Examples
+    --------
+    >>> loc_rmse([[0.03, 0.04]], [[0.0, 0.0]])  # 2-D error 5 cm: sqrt((0.03**2 + 0.04**2) / 2)
+    0.035355339059327376
+    """
+    d = np.asarray(predictions, dtype=np.float64) - np.asarray(targets, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 2 or d.shape[0] == 0:
+        raise UserError(f"predictions and targets must both be (N >= 1, 2), got {d.shape}")
+    return math.sqrt(float(np.mean(d ** 2)))
+
+
 def loc_rms_distance(predictions, targets) -> float:
     """RMS of the 2-D (Euclidean) localization error, metres: ``sqrt(mean_i |pred_i - true_i|^2)``.
 
-    Not DENALI's ``rmse`` (which pools x and y: ``sqrt(mean((pred - true)**2))``
-    over the N x 2 entries, :func:`regression_metrics`); this one is
-    ``sqrt(2)`` times larger for the same errors.
+    Not DENALI's RMSE (:func:`loc_rmse`, which pools x and y over the N x 2
+    entries); this one is ``sqrt(2)`` times larger for the same errors.
 
     Parameters
     ----------
@@ -121,6 +153,8 @@ def classification_metrics(scores, targets, *, top_k: int | None = None) -> dict
     >>> classification_metrics([[2.0, 1.0, 0.0], [0.0, 1.0, 2.0]], [0, 1], top_k=2)["top5_acc"]
     1.0
     """
+    from sklearn.metrics import f1_score, precision_score, recall_score  # only where classes are scored
+
     s = np.asarray(scores, dtype=np.float64)
     t = np.asarray(targets).astype(np.int64)
     if s.ndim != 2 or t.shape != (s.shape[0],):
@@ -154,7 +188,7 @@ def regression_metrics(predictions, targets) -> dict[str, float]:
     Returns
     -------
     dict
-        ``mse``, ``rmse``, ``mae`` (metres; over all N x 2 entries),
+        ``mse``, ``loc_rmse`` (DENALI's ``rmse``), ``mae`` (metres; over all N x 2 entries),
         ``x_mse``, ``y_mse``, ``x_mae``, ``y_mae``, ``n``.
     """
     p = np.asarray(predictions, dtype=np.float64)
@@ -166,7 +200,7 @@ def regression_metrics(predictions, targets) -> dict[str, float]:
     d = p - t
     mse = float(np.mean(d ** 2))
     return {
-        "mse": mse, "rmse": float(np.sqrt(mse)), "mae": float(np.mean(np.abs(d))),
+        "mse": mse, "loc_rmse": float(np.sqrt(mse)), "mae": float(np.mean(np.abs(d))),
         "x_mse": float(np.mean(d[:, 0] ** 2)), "y_mse": float(np.mean(d[:, 1] ** 2)),
         "x_mae": float(np.mean(np.abs(d[:, 0]))), "y_mae": float(np.mean(np.abs(d[:, 1]))),
         "n": int(p.shape[0]),

@@ -12,7 +12,8 @@ from typing import Sequence
 
 from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, real as real_bench, rig as rig_bench
 
-from nlosplan.cli.common import command_group, emit, int_type, progress_bar, sub_parser
+from nlosplan.cli.dataset import _choices, _objects
+from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
 from nlosplan.simulators.fast.bench import (
     DEFAULT_LEVELS,
@@ -27,9 +28,18 @@ from nlosplan.simulators.fast.bench import (
 )
 from nlosplan.denali import N_POSITIONS
 
+#: Peak bytes per frame of ``bench histogram``'s batched call (8x8 zones x 128 bins: arrivals, rates, float64 and
+#: float32 histograms, Poisson draws and their JAX buffers).
+_BYTES_PER_FRAME = 64 * 128 * 8 * 8
+
+
 def _cmd_bench_histogram(args) -> int:
     from nlosplan.reports.tables import format_table
+    from nlosplan.resources import check_memory
     from nlosplan.sensor_models.bench import bench_histogram
+
+    check_memory(1e9 + args.batch * (_BYTES_PER_FRAME + 64 * args.arrivals * 8 * 4), f"--batch {args.batch}",
+                 "use a smaller --batch (256 is the default)")
 
     res = bench_histogram(batch=args.batch, min_seconds=args.seconds, arrivals_per_zone=args.arrivals)
     cols = ["zones", "dtype", "mode", "frames_per_second", "zone_histograms_per_second", "compile_seconds", "speedup_vs_numpy"]
@@ -56,6 +66,15 @@ def _name_list(text: str) -> list[str]:
     return out
 
 
+def _position_list(text: str) -> list[int]:
+    out = _int_list(text)
+    bad = [p for p in out if not 0 <= p < N_POSITIONS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"{', '.join(map(str, bad))} out of range; allowed: positions 0 to "
+                                         f"{N_POSITIONS - 1}")
+    return out
+
+
 def _level_list(text: str) -> list[str]:
     out = [v.strip() for v in text.split(",") if v.strip()]
     try:
@@ -71,19 +90,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help=f"comma-separated fidelity levels (default: {','.join(DEFAULT_LEVELS)})")
     parser.add_argument("--positions", type=int_type(1, N_POSITIONS), default=N_POSITIONS, metavar="N",
                         help=f"batch over the first N of the {N_POSITIONS} DENALI positions (default: %(default)s)")
-    parser.add_argument("--reference-positions", type=_int_list, default=None, metavar="P,P,...",
+    parser.add_argument("--reference-positions", type=_position_list, default=None, metavar="P,P,...",
                         help="positions of the float64 reference (~10-20 s each; default: "
                              f"{','.join(map(str, DEFAULT_REFERENCE_POSITIONS))}, those among the first N)")
-    parser.add_argument("--objects", type=_name_list, default=list(DEFAULT_OBJECTS), metavar="A,S,...",
+    parser.add_argument("--objects", type=_objects, default=list(DEFAULT_OBJECTS), metavar="A,S,...",
                         help="DENALI objects of the mixed batch; position p holds object p mod their number "
                              f"(default: {','.join(DEFAULT_OBJECTS)})")
-    parser.add_argument("--sizes", type=_name_list, default=list(DEFAULT_SIZES), metavar="8in,4in",
+    parser.add_argument("--sizes", type=_choices(("4in", "8in")), default=list(DEFAULT_SIZES), metavar="8in,4in",
                         help=f"sizes, changing every len(objects) positions (default: {','.join(DEFAULT_SIZES)})")
     parser.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"],
                         help="precision of the timed levels (default: %(default)s; the reference is float64)")
     parser.add_argument("--repeats", type=int_type(1), default=3, help="timed calls per figure, best kept (default: 3)")
-    parser.add_argument("--plot", default=DEFAULT_PLOT, help="error-against-run-time PNG ('' for none; default: %(default)s)")
+    parser.add_argument("--plot", nargs="?", const=DEFAULT_PLOT, default=None, metavar="PATH",
+                        help=f"also plot error against run time: {DEFAULT_PLOT}, or PATH (.png, .pdf, .svg, ...)")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser
 
@@ -138,14 +158,24 @@ def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **
 
 
 
+def check_arguments(args: argparse.Namespace) -> None:
+    """What ``bench simulate`` checks before any work: the sensor and the plot path (one line each)."""
+    from nlosplan.files import check_plot_path
+    from nlosplan.sensor_models import resolve_sensor
+
+    resolve_sensor(args.sensor)
+    if args.plot:
+        check_plot_path(args.plot, "--plot")
+
+
 def _cmd_bench_simulate(args) -> int:
+    check_arguments(args)
     steps = bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions))
     with progress_bar(args, steps, "bench simulate", "step") as bar:
         def progress(text: str) -> None:
-            bar.set_postfix_str(text[:60])
-            bar.update(1)
+            bar.update(1, text[:60])
 
-        result, text = run_from_args(args, None if bar is None else progress)
+        result, text = run_from_args(args, progress)
     emit(args, result, text)
     return 0
 
@@ -157,9 +187,10 @@ def add(sub) -> None:
                          metavar="BENCHMARK")
     bh = sub_parser(bsub, "histogram", "bench histogram",
                     "histograms per second: 3x3x128 and 8x8x128, jitter + ambient + Poisson, single and vmap-batched")
-    bh.add_argument("--batch", type=int, default=256, help="frames per batched call (default: %(default)s)")
-    bh.add_argument("--seconds", type=float, default=1.0, help="minimum timed seconds per figure")
-    bh.add_argument("--arrivals", type=int, default=16, help="arrival impulses per zone (default: %(default)s)")
+    bh.add_argument("--batch", type=int_type(1), default=256, help="frames per batched call (default: %(default)s)")
+    bh.add_argument("--seconds", type=number_type(float, hi=600), default=1.0,
+                    help="minimum timed seconds per figure, > 0 (default: %(default)s)")
+    bh.add_argument("--arrivals", type=int_type(1, 4096), default=16, help="arrival impulses per zone (default: %(default)s)")
     bh.add_argument("--json", action="store_true", help="machine-readable output")
     bh.set_defaults(func=_cmd_bench_histogram)
     bs = sub_parser(bsub, "simulate", "bench simulate",

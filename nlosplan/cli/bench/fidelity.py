@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from nlosplan.cli.common import emit, int_type, note, progress_bar
+from nlosplan.cli.dataset import _choices, _objects
 
 FIDELITY_DESCRIPTION = """\
 Error against run time of both simulators on DENALI 3x3 (Lambertian objects
@@ -29,14 +30,16 @@ minutes per model for 60 cases on 2 cores. JSON: {"cases": [{"model",
 
 
 def _cmd_fidelity(args) -> int:
+    from nlosplan.files import check_plot_path
     from nlosplan.simulators.mitsuba.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
+
+    if args.plot:
+        check_plot_path(args.plot, "--plot")
 
     note(args, "bench fidelity: reference twin, then every level of both backends ...")
     with progress_bar(args, 1 + len(FAST_LEVELS) + len(TWIN_LEVELS), "bench fidelity", "step") as bar:
         def progress(text):
-            if bar is not None:
-                bar.set_postfix_str(text[:60])
-                bar.update(1)
+            bar.update(1, text[:60])
 
         result = bench_fidelity(reference_spp=args.reference_spp, seed=args.seed, progress=progress)
     text = format_bench_fidelity(result)
@@ -57,15 +60,12 @@ def _cmd_crossval(args) -> int:
     from nlosplan.simulators.mitsuba.crossval import check_models
 
     models = check_models(m.strip() for m in args.models.split(",") if m.strip())
-    objects = [o.strip() for o in args.objects.split(",") if o.strip()]
-    sizes = [z.strip() for z in args.sizes.split(",") if z.strip()]
+    objects, sizes = args.objects, args.sizes
     positions = range(0, 100, 100 // args.positions)[: args.positions]
     n = len(models) * len(objects) * len(sizes) * len(positions)
     with progress_bar(args, n, "bench crossval", "case") as bar:
         def progress(text):
-            if bar is not None:
-                bar.set_postfix_str(text[:60])
-                bar.update(1)
+            bar.update(1, text[:60])
 
         result = cross_validate(objects, sizes, positions, models=models,
                                 twin_fidelity={"spp": args.spp, "zone_sub": 8}, seed=args.seed, progress=progress)
@@ -86,7 +86,8 @@ def add_bench(bsub) -> None:
     p.add_argument("--reference-spp", type=int_type(256, 1 << 20), default=32768,
                    help="samples per pixel of the twin reference (default: %(default)s)")
     p.add_argument("--seed", type=int_type(0, 2**31), default=0, help="twin seed (default: 0)")
-    p.add_argument("--plot", default="", help="PNG of error against run time (default: none)")
+    p.add_argument("--plot", default="", metavar="PATH", help="also plot error against run time to PATH (.png, ...; "
+                                                             "default: none)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_fidelity)
     c = _parser(bsub, "crossval", "cross-validate the Mitsuba twin against the fast backend (DENALI: Lambertian, "
@@ -94,8 +95,10 @@ def add_bench(bsub) -> None:
                 "nlosplan bench crossval --models lambertian,mixed,mount --objects A,circle,3 --positions 10 --json")
     c.add_argument("--models", default="lambertian,mixed,mount",
                    help="reflectance models, comma-separated: lambertian, mixed, mount (default: %(default)s)")
-    c.add_argument("--objects", default="A,circle,3", help="DENALI objects (default: %(default)s)")
-    c.add_argument("--sizes", default="4in,8in", help="sizes (default: %(default)s)")
+    c.add_argument("--objects", type=_objects, default=["A", "circle", "3"], metavar="A,S,...",
+                   help="DENALI objects (default: A,circle,3)")
+    c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
+                   help="sizes (default: 4in,8in)")
     c.add_argument("--positions", type=int_type(1, 100), default=10,
                    help="gantry positions, evenly spaced over 0..99 (default: %(default)s)")
     c.add_argument("--spp", type=int_type(16, 1 << 20), default=4096, help="twin samples per pixel (default: 4096)")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, progress_bar
+from nlosplan.cli.common import emit, int_type, number_type, progress_bar
 from nlosplan.errors import UserError
 
 DEFAULT_PLANE = "../shared/data/tmf882x_distance/distance_data_even.json"
@@ -71,6 +71,6 @@ def add_bench(bsub) -> None:
     p.add_argument("--plane", default=DEFAULT_PLANE, help="plane captures JSON (default: %(default)s)")
     p.add_argument("--sensor", default="tmf8828-3x3-short", help="sensor to calibrate (default: %(default)s)")
     p.add_argument("--folds", type=int_type(2, 100), default=5, help="folds by distance (default: %(default)s)")
-    p.add_argument("--min-distance", type=float, default=0.06, help="nearest capture scored, m (default: 0.06)")
+    p.add_argument("--min-distance", type=number_type(float, zero_ok=True), default=0.06, help="nearest capture scored, m (default: 0.06)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd)

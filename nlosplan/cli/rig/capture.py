@@ -8,7 +8,7 @@ import json
 from contextlib import contextmanager
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, number_type, progress_bar
+from nlosplan.cli.common import emit, int_type, number_type, progress_bar, seed_type
 from nlosplan.errors import UserError
 
 EXAMPLES = {
@@ -379,7 +379,7 @@ def add_device_options(p: argparse.ArgumentParser, *, seed_help: str) -> None:
     p.add_argument("--unlock", action="store_true",
                    help="GRBL: clear an alarm with $X (after ALARM:1/2 a soft reset first); only if you know "
                         "where it is")
-    p.add_argument("--seed", type=int, default=None, help=seed_help)
+    p.add_argument("--seed", type=seed_type(), default=None, help=seed_help)
     p.add_argument("--time-scale", type=number_type(float), default=None,
                    help="emulated gantry: motion runs this much faster (default: 20)")
 
@@ -388,7 +388,7 @@ def _cmd_status(args) -> int:
     from nlosplan.hardware.status import run_status
     from nlosplan.data.store import CaptureStore
 
-    with CaptureStore(args.store, create=False) as store:
+    with CaptureStore(args.store, readonly=True) as store:
         rows = run_status(store, args.run)
     lines = []
     for r in rows:

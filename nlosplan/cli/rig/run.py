@@ -10,6 +10,7 @@ from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, number_type
 from nlosplan.errors import UserError
+from nlosplan.files import write_json
 
 EXAMPLES = (
     "nlosplan rig run --emulate --planner active --budget 40 --target-rmse 0.05 --store out/loop.db",
@@ -30,7 +31,8 @@ and -motion variants (information per second of gantry travel). Each batch
 is route-ordered (nearest neighbour + 2-opt) and run by the rig executor
 (every capture stored once; rerunning the same command resumes: stored
 captures are fed back and the deterministic planner repeats its choices).
---target-rmse stops when the cross-validated localization RMSE of the
+--target-rmse stops when the cross-validated localization RMSE (DENALI's
+loc_rmse: x and y errors pooled) of the
 ensemble over the captures reaches it. --approve shows each batch (table,
 and a PNG of the positions in --out) and waits for 'y' before anything
 moves; any other answer ends the run. With --live the batch can also be
@@ -141,7 +143,7 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
 
     def report(row):
         if not args.quiet and not args.json:
-            cv = row["cv_rmse_m"]
+            cv = row["cv_loc_rmse_m"]
             print(f"[rig run] {row['captures']} captured, {row['failed']} failed, cross-validated RMSE "
                   f"{'n/a (too few)' if cv == float('inf') else f'{1e3 * cv:.1f} mm'}, calibration "
                   f"{[round(v, 4) for v in row['calibration_theta']]}", file=sys.stderr, flush=True)
@@ -166,9 +168,9 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
               "excluded": cand.excluded,
               "finished": planner.finished or (f"budget of {args.budget} positions spent"
                                                if best["captures"] >= args.budget else "plan ended")}
-    (out / "rig_run.json").write_text(json.dumps(result, indent=1, default=float), encoding="utf-8")
+    write_json(out / "rig_run.json", result, indent=1, default=float)
     last = loop.history[-1] if loop.history else None
-    cv = "n/a" if not last or last["cv_rmse_m"] == float("inf") else f"{1e3 * last['cv_rmse_m']:.1f} mm"
+    cv = "n/a" if not last or last["cv_loc_rmse_m"] == float("inf") else f"{1e3 * last['cv_loc_rmse_m']:.1f} mm"
     text = (f"run {run_id}: {best['captures']} positions captured ({summary.captured} captures stored, "
             f"{summary.resumed} found stored), {best['failed']} failed, in {summary.seconds:.1f} s -> {args.store}\n"
             f"stopped: {result['finished']}; cross-validated localization RMSE {cv}\n"
@@ -192,7 +194,8 @@ def add_rig(rsub) -> None:
     p.add_argument("--budget", type=int_type(1, 10_000), default=40, metavar="N",
                    help="most positions to capture (default: 40)")
     p.add_argument("--target-rmse", type=number_type(float), default=None, metavar="M",
-                   help="stop when the cross-validated localization RMSE (m) reaches this, e.g. 0.05")
+                   help="stop when the cross-validated localization RMSE (m; DENALI's loc_rmse, x and y pooled) "
+                        "reaches this, e.g. 0.05")
     p.add_argument("--batch", type=int_type(1, 100), default=5, metavar="N", help="positions per batch (default: 5)")
     p.add_argument("--grid", type=int_type(2, 41), default=19, metavar="N",
                    help="candidate lattice N x N over the limits (default: 19)")

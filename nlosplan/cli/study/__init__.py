@@ -10,7 +10,8 @@ from pathlib import Path
 
 from nlosplan.cli.benchmark import add_training_options, training_options
 from nlosplan.cli.study import active as active_study, design as design_studies
-from nlosplan.cli.common import command_group, emit, names_type, note, number_type, parse_where, sub_parser
+from nlosplan.cli.common import (command_group, emit, names_type, note, number_type, parse_where, progress_bar,
+                                 seed_type, sub_parser)
 from nlosplan.errors import UserError
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
 from nlosplan.tasks.names import DEFAULT_EPOCHS, MODEL_NAMES, SPLITS, TASKS
@@ -70,11 +71,11 @@ def _reporter(args):
 
 def _import_denali(args, store: Path) -> None:
     from nlosplan.data.denali_io import import_denali
-    from nlosplan.data.store import CaptureStore
 
     note(args, f"importing DENALI folder {args.denali} into {store} (resumable) ...")
-    with CaptureStore(store, create=True, synchronous="NORMAL") as st:
-        res = import_denali(args.denali, st, trust_pickle=args.trust_pickle)
+    with progress_bar(args, None, "import DENALI", "file") as bar:
+        res = import_denali(args.denali, store, trust_pickle=args.trust_pickle,
+                            progress=lambda done, total, text: bar.set(done, total, text))
     if not args.quiet:
         print(f"imported {res['captures_added']} captures ({res['captures_skipped']} stored already) from "
               f"{res['files']} files of {args.denali} into {store} in {res['seconds']:.1f} s",
@@ -85,6 +86,7 @@ def _cmd_jitter(args) -> int:
     import torch
 
     from nlosplan.experiments.jitter import JitterStudy, load_study_dataset, run_jitter_study
+    from nlosplan.files import check_output_dir, check_output_file, check_plot_path, writing
     from nlosplan.reports.jitter_plot import jitter_text, write_jitter
 
     if args.store is None and args.denali is None:
@@ -95,8 +97,13 @@ def _cmd_jitter(args) -> int:
     study = JitterStudy(jitter_ps=tuple(args.jitter_ps), models=tuple(args.models), tasks=tuple(args.tasks),
                         zone=args.zone, split=args.split, seed=args.seed, **training_options(args))
     where = parse_where(args.where)
-    torch.set_num_threads(args.threads)
+    check_output_dir(args.out)
+    if args.plot is not None:
+        check_plot_path(args.plot)
     store = Path(args.store) if args.store is not None else Path(args.out) / "denali.sqlite"
+    if args.denali is not None:
+        check_output_file(store, "--store" if args.store is not None else "--out")
+    torch.set_num_threads(args.threads)
     if args.denali is not None:
         _import_denali(args, store)
     note(args, f"loading {store} ({', '.join(f'{k}={v}' for k, v in where.items()) or f'zones={STUDY_ZONES}'}) ...")
@@ -105,7 +112,8 @@ def _cmd_jitter(args) -> int:
     result["config"]["store"] = str(store)
     result["config"]["where"] = where
     result["config"]["denali"] = None if args.denali is None else str(args.denali)
-    files = write_jitter(result, args.out, plot=args.plot)
+    with writing(cont="free some space or choose another --out and rerun"):
+        files = write_jitter(result, args.out, plot=args.plot)
     result["files"] = files
     emit(args, result, jitter_text(result) + "\n\n" + "\n".join(f"wrote {k}: {v}" for k, v in files.items()))
     return 0
@@ -118,8 +126,9 @@ alone). Every capture is blurred by Gaussian timing jitter of FWHM J ps
 (exact re-binning through the Gaussian; default J = 0, 50, 100, 600) for
 training AND for testing, then each scene's repeats are averaged and the
 benchmark models are trained and tested on the three tasks at every level:
-localization (RMSE, MAE in m), 30-way shape (top-1, top-5, macro F1) and
-4 in vs 8 in size (accuracy, precision, recall). The split depends only on
+localization (RMSE, MAE in m; DENALI's loc_rmse, x and y errors pooled),
+30-way shape (top-1, top-5, macro F1) and 4 in vs 8 in size (accuracy,
+precision, recall). The split depends only on
 the labels and --seed, so every level trains and tests on the same scenes.
 
 Data: the captures of --store that match --where (zones={STUDY_ZONES} unless
@@ -175,7 +184,8 @@ def add(sub) -> None:
     design.add_argument("--zone", choices=("centre", "all"), default="centre",
                         help="centre zone only (DENALI) or every zone, for comparison (default: centre)")
     design.add_argument("--split", choices=SPLITS, default="random", help="train/test split (default: random)")
-    design.add_argument("--seed", type=int, default=42, help="seed of the split and training (default: 42)")
+    design.add_argument("--seed", type=seed_type(), default=42, help="seed of the split and training, 0 to 2**32-1 "
+                                                                     "(default: 42)")
     train = p.add_argument_group("training (as 'nlosplan benchmark')")
     add_training_options(train)
     train.add_argument("--threads", type=number_type(int), default=DEFAULT_THREADS, metavar="N",

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-import tomllib
-from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, names_type, number_type
 from nlosplan.errors import UserError
@@ -31,7 +29,8 @@ Each strategy runs the ask/tell loop in batches (route-ordered by
 nearest neighbour + 2-opt; gantry time from a feed/acceleration model with
 0.5 s settle and 1 s capture per stop) until both targets are reached or
 the budget is spent, once per seed. After every batch: the localization
-RMSE of the planner's ensemble localizer on fixed noisy test captures at
+RMSE (DENALI's loc_rmse, x and y errors pooled) of the planner's ensemble
+localizer on fixed noisy test captures at
 positions off the grid, and the calibration error (largest parameter
 error in units of 0.5 mm, 0.5 mm, 1 %, 1 %).
 
@@ -77,10 +76,11 @@ def _study(args):
 
     settings = {}
     if args.config:
-        try:
-            settings = tomllib.loads(Path(args.config).read_text(encoding="utf-8")).get("study", {})
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise UserError(f"cannot read study config {args.config}: {exc}") from None
+        from nlosplan.schema import load_table
+
+        settings = load_table(args.config, "study config", suffixes=(".toml",)).get("study", {})
+        if not isinstance(settings, dict):
+            raise UserError(f"study config {args.config}: [study] must be a table, not {type(settings).__name__}")
     for key, value in (("strategies", args.strategies), ("seeds", args.seeds), ("budget", args.budget),
                        ("batch_size", args.batch), ("grid", args.grid), ("test_points", args.test_points),
                        ("target_rmse_m", args.target_rmse), ("more_targets_m", args.more_targets),

@@ -7,8 +7,9 @@ batch (and, with an approval callback, asks a person first), ``ingest``
 averages each position's repeats, ingests them into the planner, refits the model and the
 calibration, records the progress, checkpoints the planner, and stops the
 loop when the localization target is reached. The target is checked on a
-cross-validated RMSE of the ensemble localizer over the captures so far (a
-real rig has no separate test set).
+cross-validated localization RMSE (DENALI's ``loc_rmse``: x and y errors
+pooled) of the ensemble localizer over the captures so far (a real rig has
+no separate test set).
 """
 
 from __future__ import annotations
@@ -20,11 +21,11 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.planner.capture.ensemble import EnsembleLocalizer
 
-__all__ = ["ClosedLoop", "cv_rmse"]
+__all__ = ["ClosedLoop", "cv_loc_rmse"]
 
 
-def cv_rmse(planner, folds: int = 5, seed: int = 0) -> float:
-    """K-fold cross-validated localization RMSE of the planner's ensemble on its captures, m (inf if < 2 K)."""
+def cv_loc_rmse(planner, folds: int = 5, seed: int = 0) -> float:
+    """K-fold cross-validated ``loc_rmse`` (DENALI's, x and y pooled) of the planner's ensemble, m (inf if < 2 K)."""
     idx = planner.captured
     if len(idx) < 2 * folds:
         return float("inf")
@@ -38,8 +39,8 @@ def cv_rmse(planner, folds: int = 5, seed: int = 0) -> float:
         train = np.setdiff1d(order, test)
         loc = EnsembleLocalizer(ref, members=planner.config.members, seed=planner.config.seed)
         loc.fit(obs[train], labels[train])
-        err.append(((loc.predict(obs[test]) - labels[test]) ** 2).sum(axis=1))
-    return float(np.sqrt(np.concatenate(err).mean()))
+        err.append((loc.predict(obs[test]) - labels[test]) ** 2)
+    return float(np.sqrt(np.concatenate(err).mean()))  # mean over the N x 2 entries: loc_rmse
 
 
 class ClosedLoop:
@@ -49,7 +50,7 @@ class ClosedLoop:
     ----------
     planner : CapturePlanner
     target_rmse_m : float, optional
-        Stop when the cross-validated localization RMSE reaches it.
+        Stop when the cross-validated ``loc_rmse`` (m) reaches it.
     approve : callable, optional
         ``approve(batch, planner)`` before anything moves: True runs the batch, False stops the
         loop, a dict ``{"drop": [ids], "add": [candidate indices]}`` runs the batch so edited
@@ -116,11 +117,11 @@ class ClosedLoop:
         self.planner.ingest(results)
         calib = self.planner.calibration()
         row = {"captures": len(self.planner.observations), "failed": len(self.planner.failures),
-               "cv_rmse_m": cv_rmse(self.planner), "calibration_theta": calib["theta"].tolist(),
+               "cv_loc_rmse_m": cv_loc_rmse(self.planner), "calibration_theta": calib["theta"].tolist(),
                "calibration_std": calib["std"].tolist()}
         self.history.append(row)
-        if self.target is not None and row["cv_rmse_m"] <= self.target:
-            self.planner.stop(f"target reached: cross-validated RMSE {1e3 * row['cv_rmse_m']:.1f} mm "
+        if self.target is not None and row["cv_loc_rmse_m"] <= self.target:
+            self.planner.stop(f"target reached: cross-validated loc_rmse {1e3 * row['cv_loc_rmse_m']:.1f} mm "
                               f"<= {1e3 * self.target:g} mm")
         self.save()
         if self.on_batch:

@@ -141,7 +141,8 @@ class EnsembleLocalizer:
         phi = np.transpose(dev, (1, 0, 2)).reshape(e.shape[1], -1)   # (N, 2M)
         return phi[:, :, None] * phi[:, None, :]
 
-    def rmse(self, histograms, labels_xy) -> float:
-        """Root-mean-square Euclidean error of :meth:`predict`, metres."""
-        err = self.predict(histograms) - np.asarray(labels_xy, dtype=np.float64).reshape(-1, 2)
-        return float(np.sqrt((err ** 2).sum(axis=1).mean()))
+    def loc_rmse(self, histograms, labels_xy) -> float:
+        """DENALI's localization RMSE of :meth:`predict` (x and y errors pooled), metres."""
+        from nlosplan.tasks.metrics import loc_rmse
+
+        return loc_rmse(self.predict(histograms), np.asarray(labels_xy, dtype=np.float64).reshape(-1, 2))

@@ -17,13 +17,13 @@ candidates are used up, or a target was reached (:meth:`stop`).
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from nlosplan.errors import UserError
+from nlosplan.files import write_json
 from nlosplan.planner.capture.calibration import (DEFAULT_PRIOR_STD, fit_counts_model, prior_information)
 from nlosplan.planner.capture.ensemble import EnsembleLocalizer
 from nlosplan.planner.capture.motion import MotionModel
@@ -356,12 +356,7 @@ class CapturePlanner:
 
         ``extra`` adds top-level entries (e.g. a closed loop's history); :meth:`load` ignores them.
         """
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps({**(extra or {}), **self.state_dict()}), encoding="utf-8")
-        os.replace(tmp, path)
-        return path
+        return write_json(path, {**(extra or {}), **self.state_dict()})
 
     @classmethod
     def load(cls, path, space) -> "CapturePlanner":

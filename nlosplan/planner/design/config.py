@@ -18,25 +18,39 @@ keeps the default of the chosen mode)::
 
     [search]                     # SearchConfig (fidelity as a table of tables)
     seeds = 3
+    seed = 0                     # the run's seed (--seed): noise, splits and training seeds
+    models = ["mlp", "cnn1d"]    # candidate learners (--models); the best per task is used
+    max_seeds = 8                # most seeds of an undecided candidate
+    budget = 30                  # extra evaluations to decide undecided candidates
 
     [scenes]                     # SceneSet: simulated scenes of the evaluators
     positions_stride = 2
+
+    [worlds]                     # WorldsConfig: plausible worlds the answer must hold in
+    count = 8                    # --worlds
+    quorum = 0.9                 # a minimum design must be met in this fraction of them
+    scene_step = 2               # worlds simulate every 2nd position of the run's scenes
+    [worlds.ranges]              # what no data pins down (replaces the defaults when given)
+    albedo = {low = 0.3, high = 0.7}
+    photon_scale = {low = 0.5, high = 2.0, relative = true, log = true}
 """
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
 from nlosplan.errors import UserError, check_keys
+from nlosplan.schema import (NUMBER, STRING, Spec, check_types, int_in, list_of, load_table, number_in, one_of,
+                             pair_of, predicate, table_of)
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
 from nlosplan.planner.design.run import DesignConfig
 from nlosplan.planner.design.search import SearchConfig
-from nlosplan.planner.design.space import DesignSpace
+from nlosplan.planner.design.space import DesignSpace, parse_zones
+from nlosplan.planner.design.worlds import WorldsConfig
 
 __all__ = ["full_config", "quick_config", "load_config", "QUICK_OBJECTS"]
 
@@ -58,61 +72,110 @@ def quick_config() -> DesignConfig:
     fid["trained"]["epochs"] = 20
     space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
                         axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
-    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid)
+    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid,
+                          max_seeds=4, budget=8)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
-    return DesignConfig(space=space, search=search, scenes=scenes, label="quick")
+    worlds = WorldsConfig(count=4, scene_step=2, candidates=2)
+    return DesignConfig(space=space, search=search, scenes=scenes, label="quick", worlds=worlds)
 
 
-def _table(data: dict, name: str) -> dict:
+def _schema() -> dict:
+    """What each key of a design TOML must hold (checked when the file is read, before any work)."""
+    from nlosplan.denali import DENALI_OBJECTS, SIZES
+    from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS
+
+    zone = Spec('a zone grid such as "3x3"', parse_zones)  # a UserError of parse_zones marks a bad value
+    objects = list_of(predicate('a DENALI object such as "A" or "circle"', lambda v: v in DENALI_OBJECTS), min_len=1)
+    count = int_in(1)
+    return {
+        "space": {"reference": STRING, "zones": list_of(zone, min_len=1), "bin_factors": list_of(int_in(1, 64), min_len=1),
+                  "n_bins": pair_of(int_in(1, 4096)), "jitter_fwhm_ps": pair_of(number_in(0)),
+                  "pulse_fwhm_ps": pair_of(number_in(0)), "photon_fraction": pair_of(number_in(0, 1)),
+                  "axes": list_of(STRING, min_len=1)},
+        "requirement": {"task": one_of("loc", "shape", "size"), "threshold": NUMBER, "condition": STRING},
+        "cost": {k: number_in(0) for k in CostModel().to_dict()},
+        "search": {"grid_points": count, "refine_steps": int_in(0), "seeds": int_in(1, 20), "candidates": count,
+                   "optimize_evals": count, "fidelity": table_of()},
+        "bound": {"draws": count, "crlb_repeats": count},
+        "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
+                    "bootstrap": int_in(0)},
+        "scenes": {"objects": objects, "sizes": list_of(one_of(*SIZES), min_len=1),
+                   "positions": list_of(int_in(0, 99), min_len=1), "positions_stride": int_in(1, 99),
+                   "lights": one_of("off", "on"), "repeats": count, "crlb_objects": objects, "crlb_stride": count,
+                   "fidelity": one_of(*FIDELITY_LEVELS), "backend": one_of("fast", "mitsuba")},
+    }
+
+
+def _table(data: dict, name: str, where: str) -> dict:
     t = data.get(name, {})
     if not isinstance(t, dict):
-        raise UserError(f"[{name}] must be a table")
+        raise UserError(f"{where}: [{name}] must be a table, not {type(t).__name__} {t!r}")
     return t
 
 
 def load_config(path, base: DesignConfig) -> DesignConfig:
-    """``base`` with the tables of a TOML file applied (see the module notes)."""
+    """``base`` with the tables of a TOML file applied (see the module notes).
+
+    Every table and key is type- and range-checked when the file is read,
+    before any evaluation: a wrong type is one line naming the file, the
+    table, the key and what it must hold.
+    """
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text())
-    except FileNotFoundError:
-        raise UserError(f"configuration file {p} does not exist") from None
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise UserError(f"cannot read {p}: {exc}") from None
-    check_keys(data, ("space", "requirements", "cost", "search", "scenes"), "table(s)", prefix=f"{p}: ")
+    data = load_table(p, "configuration file", suffixes=(".toml",))
+    check_keys(data, ("space", "requirements", "cost", "search", "scenes", "worlds"), "table(s)", prefix=f"{p}: ")
+    types = _schema()
     cfg = base
     if "space" in data:
-        cfg = replace(cfg, space=DesignSpace.from_dict({**base.space.to_dict(), **_table(data, "space")}))
+        space = check_types(_table(data, "space", str(p)), types["space"], f"{p}: [space]")
+        cfg = replace(cfg, space=DesignSpace.from_dict({**base.space.to_dict(), **space}))
     if "requirements" in data:
         reqs = data["requirements"]
-        if not isinstance(reqs, list) or not reqs:
+        if not isinstance(reqs, list) or not reqs or not all(isinstance(r, dict) for r in reqs):
             raise UserError(f"{p}: [[requirements]] must be a non-empty array of tables")
+        reqs = [check_types(r, types["requirement"], f"{p}: [[requirements]] #{i + 1}") for i, r in enumerate(reqs)]
         try:
             cfg = replace(cfg, requirements=tuple(Requirement.from_dict(r) for r in reqs))
         except (KeyError, TypeError) as exc:
             raise UserError(f"{p}: each requirement needs task and threshold ({exc})") from None
     if "cost" in data:
-        cfg = replace(cfg, cost=CostModel.from_dict({**base.cost.to_dict(), **_table(data, "cost")}))
+        cost = check_types(_table(data, "cost", str(p)), types["cost"], f"{p}: [cost]")
+        cfg = replace(cfg, cost=CostModel.from_dict({**base.cost.to_dict(), **cost}))
     if "search" in data:
-        s = dict(_table(data, "search"))
+        s = dict(check_types(_table(data, "search", str(p)), types["search"], f"{p}: [search]"))
         given = s.pop("fidelity", {})
         check_keys(given, tuple(base.search.fidelity), "evaluator(s)", prefix=f"{p}: ", suffix=" in [search.fidelity]")
+        for name, knobs in given.items():
+            if not isinstance(knobs, dict):
+                raise UserError(f"{p}: [search.fidelity] {name} = {knobs!r} must be a table of knobs, e.g. "
+                                f"[search.fidelity.{name}]")
+            check_types(knobs, types.get(name, {}), f"{p}: [search.fidelity.{name}]")
         fid = {k: {**v, **given.get(k, {})} for k, v in base.search.fidelity.items()}
         try:
             cfg = replace(cfg, search=replace(base.search, fidelity=fid, **s))
         except TypeError as exc:
             raise UserError(f"{p}: [search]: {exc}") from None
+        except UserError as exc:
+            raise UserError(f"{p}: {exc}") from None
     if "scenes" in data:
-        s = dict(_table(data, "scenes"))
+        s = dict(check_types(_table(data, "scenes", str(p)), types["scenes"], f"{p}: [scenes]"))
         stride = s.pop("positions_stride", None)
         if stride is not None:
-            s["positions"] = tuple(range(0, 100, int(stride)))
+            s["positions"] = tuple(range(0, 100, stride))
         try:
-            cfg = replace(cfg, scenes=replace(base.scenes, **{k: tuple(v) if isinstance(v, list) else v
-                                                             for k, v in s.items()}))
+            cfg = replace(cfg, scenes=replace(base.scenes, **s))
         except TypeError as exc:
             raise UserError(f"{p}: [scenes]: {exc}") from None
+    if "worlds" in data:
+        try:
+            cfg = replace(cfg, worlds=WorldsConfig.from_dict(_table(data, "worlds", str(p)), base.worlds))
+        except UserError as exc:
+            raise UserError(f"{p}: {exc}") from None
+        for r in cfg.worlds.ranges or ():
+            try:
+                r.check(cfg.space.sensor)
+            except UserError as exc:
+                raise UserError(f"{p}: {exc}") from None
     return cfg
 
 

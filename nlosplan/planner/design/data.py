@@ -23,10 +23,12 @@ import numpy as np
 import pandas as pd
 
 from nlosplan.errors import UserError
+from nlosplan.files import atomic_path
 from nlosplan.sensor_models import SensorConfig
 from nlosplan.sensor_models.degrade import Degradation, degrade_counts, degrade_expected, degrade_linear, reach
 
-__all__ = ["SceneSet", "ReferenceData", "simulate_reference", "reference_from_dataset", "load_reference"]
+__all__ = ["SceneSet", "ReferenceData", "simulate_reference", "reference_from_dataset", "load_reference",
+           "build_reference"]
 
 #: Label columns a reference keeps (a subset of the data room's LABEL_COLUMNS).
 REFERENCE_COLUMNS = ("object", "size", "class_group", "position", "x", "y", "lights")
@@ -47,7 +49,8 @@ class SceneSet:
     repeats : int
         Noisy captures per scene for the trained evaluator (averaged, as DENALI does).
     crlb_objects : tuple of str
-        Objects of the localization bound's scenes (all sizes, every ``crlb_stride``-th position).
+        Objects of the localization bound's scenes (all sizes, every ``crlb_stride``-th position);
+        none: no bound scenes (a world's reference).
     crlb_stride : int
     fidelity : str
         Simulator level of the reference histograms.
@@ -55,6 +58,9 @@ class SceneSet:
         Simulator of the reference histograms: the fast JAX backend, or the Mitsuba 3 twin (about
         0.1 s per scene and zone layout on 2 cores; it measures the relay wall only). The bound
         scenes' Jacobians always come from the fast backend (the twin is not differentiated here).
+    scene_kwargs : tuple of (str, float)
+        Keyword arguments of every :func:`~nlosplan.simulators.denali_scene` (a world's scene overrides,
+        e.g. ``(("albedo", 0.4),)``).
     """
 
     objects: tuple[str, ...]
@@ -66,13 +72,25 @@ class SceneSet:
     crlb_stride: int = 5
     fidelity: str = "low"
     backend: str = "fast"
+    scene_kwargs: tuple = ()
 
     def __post_init__(self) -> None:
         if self.backend not in ("fast", "mitsuba"):
             raise UserError(f"unknown simulation backend {self.backend!r}; allowed: fast, mitsuba")
+        kw = self.scene_kwargs.items() if isinstance(self.scene_kwargs, dict) else self.scene_kwargs
+        object.__setattr__(self, "scene_kwargs", tuple(sorted((str(k), float(v)) for k, v in kw)))
 
     def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
+        out = {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
+        if not self.scene_kwargs:  # the key of a run without worlds stays what it was
+            del out["scene_kwargs"]
+        else:
+            out["scene_kwargs"] = [list(kv) for kv in self.scene_kwargs]
+        return out
+
+    @property
+    def n_scenes(self) -> int:
+        return len(self.objects) * len(self.sizes) * len(self.positions)
 
     def key(self, sensor: SensorConfig) -> str:
         text = json.dumps({"scenes": self.to_dict(), "sensor": sensor.to_dict()}, sort_keys=True, default=str)
@@ -151,14 +169,12 @@ class ReferenceData:
     # --------------------------------------------------------------- files
     def save(self, path: str | Path) -> Path:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {k: getattr(self, k) for k in ("means", "counts", "crlb_lam", "crlb_jac") if getattr(self, k) is not None}
         meta = {"sensor": self.sensor.to_dict(), "source": self.source, "seconds": self.seconds,
                 "labels": self.labels.to_dict(orient="list"),
                 "crlb_labels": None if self.crlb_labels is None else self.crlb_labels.to_dict(orient="list")}
-        tmp = path.with_name(path.name + ".part.npz")
-        np.savez(tmp, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
-        tmp.replace(path)
+        with atomic_path(path) as tmp:
+            np.savez(tmp, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), **arrays)
         return path
 
 
@@ -220,18 +236,22 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
 
     t0 = time.perf_counter()
     labels = _scene_labels(scenes.objects, scenes.sizes, scenes.positions, scenes.lights)
+    kw = dict(scenes.scene_kwargs)
     means = []
     for obj in scenes.objects:  # one object at a time: bounded memory, a progress step each
-        batch = [denali_scene(obj, s, p, lights=scenes.lights) for s in scenes.sizes for p in scenes.positions]
+        batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw) for s in scenes.sizes for p in scenes.positions]
         if scenes.backend == "mitsuba":
             means.append(np.stack([_twin_expected(sc, sensor, scenes.fidelity) for sc in batch]).astype(np.float32))
         else:
             means.append(np.asarray(FastSimulator(batch, sensor, fidelity=scenes.fidelity).expected(), np.float32))
         if progress:
             progress(f"{sensor.zones_rows}x{sensor.zones_cols} {obj}")
+    if not scenes.crlb_objects:
+        return ReferenceData(sensor, labels, means=np.concatenate(means), source=scenes.backend,
+                             seconds=time.perf_counter() - t0)
     crlb_pos = scenes.positions[:: scenes.crlb_stride]
-    crlb_scenes = [denali_scene(o, s, p, lights=scenes.lights) for o in scenes.crlb_objects for s in scenes.sizes
-                   for p in crlb_pos]
+    crlb_scenes = [denali_scene(o, s, p, lights=scenes.lights, **kw) for o in scenes.crlb_objects
+                   for s in scenes.sizes for p in crlb_pos]
     lam, jac, _, _ = counts_and_jacobian(crlb_scenes, sensor, fidelity=scenes.fidelity)
     r, c = sensor.zones_rows, sensor.zones_cols
     lam = lam.reshape(len(crlb_scenes), r, c, -1)
@@ -268,3 +288,27 @@ def reference_from_dataset(dataset, sensor: SensorConfig, source: str) -> Refere
         raise UserError(f"captures lack label column(s) {', '.join(missing)}")
     return ReferenceData(sensor, labels[list(REFERENCE_COLUMNS)].copy(), counts=np.round(h).astype(np.int64),
                          source=source)
+
+
+def build_reference(job) -> dict:
+    """Simulate and save one reference unless its file exists (runs on any executor).
+
+    Parameters
+    ----------
+    job : ReferenceJob
+        ``path``, ``sensor`` and ``scenes`` (:class:`~nlosplan.planner.design.jobs.ReferenceJob`).
+
+    Returns
+    -------
+    dict
+        ``path``, ``status`` (``"ok"``), ``seconds`` (simulation time; 0 when the file was there) and
+        ``scenes``.
+    """
+    path = Path(job.path)
+    seconds = 0.0
+    if not path.exists():
+        ref = simulate_reference(job.sensor, job.scenes)
+        ref.save(path)
+        seconds = ref.seconds
+    return {"path": str(path), "status": "ok", "seconds": seconds, "scenes": job.scenes.n_scenes,
+            "label": job.label}

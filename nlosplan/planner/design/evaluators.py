@@ -10,21 +10,26 @@ Evaluators
 ----------
 ``bound``
     Localization: the Cramér–Rao bound on (x, y) with the photon scale a
-    nuisance, RMS over the bound scenes (from the simulated reference's
-    Jacobian, degraded to the design; no interval: it is exact for those
-    scenes). Shape and size: the ideal observer's Monte-Carlo accuracy
+    nuisance, on DENALI's ``loc_rmse`` (the trace of the position covariance
+    is a 2-D mean square, so it is halved under the root), RMS over the bound
+    scenes (from the simulated reference's Jacobian, degraded to the design;
+    no interval: it is exact for those scenes). Shape and size: the ideal observer's Monte-Carlo accuracy
     (Poisson likelihood under every hypothesis, position and the other
     label unknown), Wilson interval. A bound is optimistic: a design that
     fails it fails every model.
 ``trained``
-    DENALI's MLP trained on noisy captures of the design (repeats averaged),
-    random 70/30 split by scene, metric on the test scenes; interval by
-    bootstrap over the test scenes. The split, targets, training settings and
-    training are the benchmark's (:func:`~nlosplan.tasks.benchmark.task_data`,
+    A benchmark model (``fidelity["model"]``: the run's best learner of the
+    task) trained on noisy captures of the design (repeats averaged), random
+    70/30 split by scene, metric on the test scenes; interval by bootstrap
+    over the test scenes. The seed draws the Poisson noise, the split and the
+    training (a re-run at another seed changes all three). The split,
+    targets, training settings and training are the benchmark's
+    (:func:`~nlosplan.tasks.benchmark.task_data`,
     :func:`~nlosplan.tasks.benchmark.train_config`,
-    :func:`~nlosplan.tasks.training.train_model`); the metrics are the
-    scoring module's (:mod:`nlosplan.tasks.metrics`: ``loc_rms_distance``,
-    ``top1_acc``).
+    :func:`~nlosplan.tasks.training.train_model`), the metrics the scoring
+    module's (:mod:`nlosplan.tasks.metrics`: ``loc_rmse``, ``top1_acc``;
+    ``loc_rms_distance`` in ``extra``): :func:`trained_metric` gives the
+    benchmark table's number for the same model and data.
 """
 
 from __future__ import annotations
@@ -37,10 +42,12 @@ import numpy as np
 from nlosplan.planner.design.data import load_reference
 from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import METRIC_OF_TASK, Condition
+from nlosplan.planner.design.worlds import world_sensor
 
-__all__ = ["evaluate", "DEFAULT_FIDELITY"]
+__all__ = ["evaluate", "trained_metric", "DEFAULT_FIDELITY"]
 
-#: Knobs of each evaluator (the error-against-run-time axis of the report).
+#: Knobs of each evaluator (the error-against-run-time axis of the report). The trained evaluator's
+#: ``model`` is set per task by the search (the run's best learner); "mlp" where none is chosen.
 DEFAULT_FIDELITY: dict[str, dict] = {
     "bound": {"draws": 400, "crlb_repeats": 1},
     "trained": {"model": "mlp", "epochs": 30, "width": 0.25, "repeats": 2, "bootstrap": 200},
@@ -67,7 +74,8 @@ def _crlb(ref, deg, repeats: int, condition) -> tuple[float, str]:
         traces.append(tr)
         if not math.isfinite(tr):
             bad.append(res["reason"] or "zero information")
-    value = math.sqrt(float(np.mean(traces))) if traces else math.nan
+    # the trace is the 2-D mean square (var_x + var_y); loc_rmse pools x and y: halve it under the root
+    value = math.sqrt(float(np.mean(traces)) / 2.0) if traces else math.nan
     return value, (f"{len(bad)} of {n} scenes not identifiable: {bad[0]}" if bad else "")
 
 
@@ -107,9 +115,6 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     import torch
 
     from nlosplan.data.dataset import Dataset
-    from nlosplan.tasks.benchmark import task_classes, task_data, train_config
-    from nlosplan.tasks.metrics import loc_rms_distance, top1_accuracy
-    from nlosplan.tasks.training import train_model
 
     torch.set_num_threads(1)
     caps = ref.design_captures(deg, np.random.default_rng([seed, 7]), int(fid["repeats"]))
@@ -118,7 +123,37 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     labels["zones"] = f"{hist.shape[1]}x{hist.shape[2]}"
     labels["repeat"] = -1
     labels["source"] = ref.source
-    ds = Dataset(hist, labels, deg.bin_width_ps)
+    return trained_metric(Dataset(hist, labels, deg.bin_width_ps), task, fid, seed, condition)
+
+
+def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | None = None
+                   ) -> tuple[float, tuple[float, float], dict]:
+    """Train ``fid["model"]`` on ``ds`` as the benchmark does and score the test rows.
+
+    Parameters
+    ----------
+    ds : nlosplan.data.dataset.Dataset
+        One row per scene (repeats already averaged).
+    task : {"loc", "shape", "size"}
+    fid : dict
+        ``model``, ``epochs``, ``width``, ``bootstrap`` (draws of the interval).
+    seed : int
+        Seed of the split and the training (:func:`~nlosplan.tasks.benchmark.run_benchmark`'s ``seed``).
+    condition : Condition, optional
+        The test rows the metric is computed on.
+
+    Returns
+    -------
+    value, (lo, hi), extra
+        ``loc_rmse`` (m) or ``top1_acc`` on the test rows, its bootstrap 95 % interval, and details
+        (``epochs``, ``n_train``, ``n_test``, ``train_seconds``; ``loc_rms_distance`` for localization).
+        The value equals the benchmark table's overall ``loc_rmse`` / ``top1_acc`` of the same model,
+        data, seed, epochs and width.
+    """
+    from nlosplan.tasks.benchmark import task_classes, task_data, train_config
+    from nlosplan.tasks.metrics import loc_rms_distance, loc_rmse, top1_accuracy
+    from nlosplan.tasks.training import train_model
+
     classes = task_classes(ds, task)
     data = task_data(ds, task, "random", seed=seed, classes=classes)
     cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
@@ -126,15 +161,18 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
                         width=float(fid["width"]), classes=classes)
     keep = _rows(data.test.labels, condition)
     scores, truth = model.predict(data.test.histograms)[keep], data.y_test[keep]
-    score = loc_rms_distance if task == "loc" else top1_accuracy
+    score = loc_rmse if task == "loc" else top1_accuracy
     stat = lambda i: score(scores[i], truth[i])  # noqa: E731
     n = int(keep.sum())
     if n == 0:
         return math.nan, (math.nan, math.nan), {}
     value = stat(np.arange(n))
     lo, hi = _bootstrap(stat, n, int(fid["bootstrap"]), seed)
-    return value, (lo, hi), {"epochs": len(model.history), "n_train": int(model.n_train), "n_test": n,
-                             "train_seconds": float(model.train_seconds)}
+    extra = {"model": fid["model"], "epochs": len(model.history), "n_train": int(model.n_train), "n_test": n,
+             "train_seconds": float(model.train_seconds)}
+    if task == "loc":
+        extra["loc_rms_distance"] = loc_rms_distance(scores, truth)
+    return value, (lo, hi), extra
 
 
 def evaluate(job: DesignJob) -> dict:
@@ -148,7 +186,8 @@ def evaluate(job: DesignJob) -> dict:
         ``seed``, ``fidelity`` (dict of knobs), ``condition`` (a :class:`Condition`
         or None), ``reference`` (path of the saved
         :class:`~nlosplan.planner.design.data.ReferenceData` of the design's zone
-        layout), ``reference_sensor`` (the space's reference, a dict).
+        layout, a world's in a world), ``reference_sensor`` (the space's reference,
+        a dict) and ``world`` (the world's sensor overrides, or None).
 
     Returns
     -------
@@ -164,7 +203,7 @@ def evaluate(job: DesignJob) -> dict:
            "hi": math.nan, "status": "ok", "reason": "", "extra": {}}
     try:
         ref = load_reference(job.reference)
-        deg, why = ref.degradation(job.design.sensor(SensorConfig.from_dict(job.reference_sensor)))
+        deg, why = ref.degradation(world_sensor(job.design, SensorConfig.from_dict(job.reference_sensor), job.world))
         if deg is None:
             out.update(status="unreachable", reason=why)
         elif job.evaluator == "bound" and job.task == "loc":

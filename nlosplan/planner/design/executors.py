@@ -19,8 +19,9 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
 
 from nlosplan.errors import UserError
+from nlosplan.planner.design.workers import init_worker
 
-__all__ = ["make_executor", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
+__all__ = ["make_executor", "init_worker", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
 
 
 def _failed(job, exc: BaseException) -> dict:
@@ -45,16 +46,6 @@ class SerialExecutor:
         """Nothing to release: jobs ran in this process."""
 
 
-def _init_worker() -> None:  # one thread per worker: the pool provides the parallelism
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover - torch is a dependency
-        pass
-
-
 class PoolExecutor:
     """A local process pool (``spawn``: safe with JAX and torch in the parent)."""
 
@@ -63,7 +54,7 @@ class PoolExecutor:
     def __init__(self, workers: int):
         self.workers = int(workers)
         self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                         initializer=_init_worker)
+                                         initializer=init_worker, initargs=(os.getpid(),))
 
     def map(self, fn, jobs):
         jobs = list(jobs)
@@ -99,18 +90,22 @@ class DaskExecutor:
             self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                          dashboard_address=None, host="127.0.0.1")
             self._client = Client(self._cluster)
+            from nlosplan.planner.design.dask_plugin import WatchParent
+
+            # the workers are this process's children: they end with it, even on kill -9
+            self._client.register_plugin(WatchParent(os.getpid()))
             self.workers = n
             self.name = f"dask LocalCluster ({n} workers)"
         elif address.startswith("tcp://"):
             try:
-                self._client = Client(address, timeout="10s")
+                self._client = Client(address, timeout="5s")
             except (OSError, TimeoutError) as exc:
                 raise UserError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
             self.workers = max(1, len(self._client.scheduler_info().get("workers", {})))
             self.name = f"dask {address} ({self.workers} workers)"
         else:
             raise UserError(f"--cluster {address!r}: give tcp://HOST:PORT or local:N")
-        self._client.run(_init_worker)
+        self._client.run(init_worker)
 
     def map(self, fn, jobs):
         from dask.distributed import as_completed

@@ -18,10 +18,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nlosplan.planner.design.cost import CostModel
+from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.requirements import Condition, Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.sensor_models import SensorConfig
 
-__all__ = ["DesignJob", "OptimizeJob", "EVALUATORS"]
+__all__ = ["DesignJob", "OptimizeJob", "ReferenceJob", "EVALUATORS"]
 
 #: ``bound`` (CRLB / ideal observer), ``trained`` (models on the trained reference: real captures when given),
 #: ``trained_sim`` (models on the simulated reference, beside real ones).
@@ -46,6 +48,9 @@ class DesignJob:
         Path of the saved :class:`~nlosplan.planner.design.data.ReferenceData` of the design's zone layout.
     reference_sensor : dict
         The space's reference sensor (:meth:`SensorConfig.to_dict`).
+    world : dict, optional
+        A world's sensor overrides (:func:`~nlosplan.planner.design.worlds.world_sensor`; the reference
+        file is that world's); None in the nominal model.
     """
 
     evaluator: str
@@ -56,6 +61,7 @@ class DesignJob:
     condition: Condition | None
     reference: str
     reference_sensor: dict
+    world: dict | None = None
 
     @property
     def key(self) -> str:
@@ -63,13 +69,16 @@ class DesignJob:
         fields = {"evaluator": self.evaluator, "task": self.task, "design": self.design.to_dict(), "seed": self.seed,
                   "fidelity": self.fidelity, "condition": None if self.condition is None else str(self.condition),
                   "reference": Path(self.reference).name}  # names carry the content hash
+        if self.world is not None:  # nominal jobs keep the key they always had
+            fields["world"] = self.world
         return hashlib.sha1(json.dumps(fields, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     def to_dict(self) -> dict:
         """The job as a result record carries it: plain values, the condition as ``col=value``, and ``key``."""
         return {"evaluator": self.evaluator, "task": self.task, "design": self.design.to_dict(), "seed": self.seed,
                 "fidelity": self.fidelity, "condition": None if self.condition is None else str(self.condition),
-                "reference": self.reference, "reference_sensor": self.reference_sensor, "key": self.key}
+                "reference": self.reference, "reference_sensor": self.reference_sensor, "world": self.world,
+                "key": self.key}
 
 
 @dataclass(frozen=True)
@@ -116,3 +125,29 @@ class OptimizeJob:
         """The bound evaluation of ``design`` under this run's requirement (seed 0)."""
         return DesignJob("bound", self.requirement.task, design, 0, self.fidelity, self.requirement.condition,
                          self.reference, self.reference_sensor)
+
+
+@dataclass(frozen=True)
+class ReferenceJob:
+    """One reference to simulate and save (a zone layout, in the nominal model or in a world).
+
+    Parameters
+    ----------
+    path : str
+        Where to save it (nothing is simulated when the file exists).
+    sensor : SensorConfig
+        The layout's reference sensor (in the world, for a world's reference).
+    scenes : SceneSet
+        Its scenes (with the world's ``scene_kwargs``).
+    label : str
+        E.g. ``"3x3"`` or ``"world 2, 1x1"`` (for progress and the report).
+    """
+
+    path: str
+    sensor: SensorConfig
+    scenes: SceneSet
+    label: str
+
+    def to_dict(self) -> dict:
+        return {"path": self.path, "sensor": self.sensor.to_dict(), "scenes": self.scenes.to_dict(),
+                "label": self.label}

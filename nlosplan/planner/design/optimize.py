@@ -20,7 +20,7 @@ import numpy as np
 
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.jobs import OptimizeJob
-from nlosplan.planner.design.search import metric_to_score, score_to_metric
+from nlosplan.planner.design.verdicts import metric_to_score, score_to_metric
 from nlosplan.planner.design.space import Design, DesignSpace
 
 __all__ = ["optimize_jobs", "optimize_choice", "collect_candidates"]
@@ -115,7 +115,9 @@ def optimize_choice(job: OptimizeJob) -> dict:
 
 
 def collect_candidates(search, results: list[dict], per_task: int) -> dict[str, list[dict]]:
-    """The ``per_task`` cheapest feasible, distinct designs per requirement."""
+    """Per requirement: the ``per_task`` cheapest feasible, distinct optimized designs, then the ``per_task``
+    cheapest scanned designs whose learner meets it on average and is not already failed
+    (:meth:`~nlosplan.planner.design.search.DesignSearch.scan_candidates`); each with ``source``."""
     out = {}
     for req in search.requirements:
         rows = sorted((r for r in results if r["requirement"] == req.name and r["status"] == "feasible"),
@@ -125,8 +127,9 @@ def collect_candidates(search, results: list[dict], per_task: int) -> dict[str, 
             d = Design.from_dict(r["design"])
             if d not in seen:
                 seen.add(d)
-                picked.append({**r, "design": d})
+                picked.append({**r, "design": d, "source": "optimized"})
             if len(picked) >= per_task:
                 break
+        picked += [c for c in search.scan_candidates(req, per_task) if c["design"] not in seen]
         out[req.name] = picked
     return out

@@ -21,7 +21,7 @@ from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.requirements import Requirement
-from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, read_evaluations
+from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, check_log
 from nlosplan.planner.design.search import DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
@@ -87,12 +87,18 @@ def search_from_files(out, results: list[dict] | None = None) -> tuple[DesignSea
         raise UserError(f"{out / CHECKPOINT} holds a configuration this nlosplan cannot read ({exc!r})") from None
     sims, real = _reference_paths(out, space, scenes, cfg)
     search = DesignSearch(space, reqs, search_cfg, sims, cost, real or None)
-    search.ingest(read_evaluations(out / EVALUATIONS) if results is None else results)
+    search.ingest(_logged(out) if results is None else results)
     if ckpt.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v] for k, v in ckpt["candidates"].items()}
         search.stage = "optimize"
         search.set_candidates(cands, ckpt.get("optimize_log") or [])
     return search, ckpt
+
+
+def _logged(out: Path) -> list[dict]:
+    """The evaluations a run logged so far, for a reader that watches it: damaged lines are left out, never fatal
+    (the run itself stops on them when it resumes; see :func:`~nlosplan.planner.design.run.check_log`)."""
+    return check_log(out / EVALUATIONS, repair=True).results
 
 
 def design_progress(out, results: list[dict] | None = None) -> dict:
@@ -116,7 +122,7 @@ def design_progress(out, results: list[dict] | None = None) -> dict:
         at the end) and ``finished`` (``result.json`` is there, newer than the checkpoint: the run ended).
     """
     out = Path(out)
-    results = read_evaluations(out / EVALUATIONS) if results is None else results
+    results = _logged(out) if results is None else results
     search, ckpt = search_from_files(out, results)
     jobs = search.suggest()
     if jobs:

@@ -1,9 +1,9 @@
 """What a task must achieve: one threshold on one metric, optionally under one condition.
 
-Defaults (DENALI-scale goals for a lab): localization RMS distance <= 0.05 m
-(``loc_rms_distance``: the RMS of the 2-D Euclidean error, sqrt(2) times
-DENALI's pooled ``rmse``), shape top-1 accuracy >= 0.35, size accuracy >=
-0.90, over all test captures. A
+Defaults (DENALI-scale goals for a lab): localization RMSE <= 0.05 m
+(``loc_rmse``, DENALI's: x and y errors pooled, see
+:data:`nlosplan.tasks.metrics.METRIC_DEFINITIONS`), shape top-1 accuracy >=
+0.35, size accuracy >= 0.90, over all test captures. A
 :class:`Condition` restricts the rows a metric is computed on, e.g.
 ``size=4in``, ``lights=off`` or ``quadrant=far`` (the far quadrant of the
 gantry, see :func:`nlosplan.tasks.metrics.position_quadrants`); it is parsed
@@ -25,7 +25,7 @@ __all__ = ["Condition", "Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK",
 
 #: The metric each task is judged by, whether smaller is better, and its unit.
 METRIC_OF_TASK: dict[str, tuple[str, bool, str]] = {
-    "loc": ("loc_rms_distance", True, "m"),
+    "loc": ("loc_rmse", True, "m"),
     "shape": ("top1_acc", False, ""),
     "size": ("top1_acc", False, ""),
 }
@@ -66,7 +66,7 @@ class Requirement:
     ----------
     task : {"loc", "shape", "size"}
     threshold : float
-        Metres for the localization RMS distance, a fraction for accuracies.
+        Metres for the localization RMSE (``loc_rmse``), a fraction for accuracies.
     condition : Condition or (str, str), optional
         ``(column, value)`` among size / lights / quadrant (kept as a :class:`Condition`).
     """
@@ -100,7 +100,7 @@ class Requirement:
 
     @property
     def name(self) -> str:
-        """E.g. ``loc loc_rms_distance <= 0.05 m`` or ``shape top1_acc >= 0.35 [size=4in]``."""
+        """E.g. ``loc loc_rmse <= 0.05 m`` or ``shape top1_acc >= 0.35 [size=4in]``."""
         op = "<=" if self.smaller_is_better else ">="
         unit = METRIC_OF_TASK[self.task][2]
         cond = f" [{self.condition}]" if self.condition else ""
@@ -130,15 +130,24 @@ class Requirement:
 DEFAULT_REQUIREMENTS: tuple[Requirement, ...] = (
     Requirement("loc", 0.05), Requirement("shape", 0.35), Requirement("size", 0.90))
 
-_PATTERN = re.compile(r"^\s*(loc|shape|size)\s*(?:<=|>=|=)\s*([0-9.eE+-]+)\s*(?:@\s*(\w+)=(\w+))?\s*$")
+_PATTERN = re.compile(r"^\s*(loc|shape|size)\s*(<=|>=|=)\s*([0-9.eE+-]+)\s*(?:@\s*(\w+)=(\w+))?\s*$")
 
 
 def parse_requirement(text: str) -> Requirement:
-    """``"loc<=0.05"``, ``"shape>=0.35"``, ``"size>=0.9@size=4in"`` -> :class:`Requirement`."""
+    """``"loc<=0.05"``, ``"shape>=0.35"``, ``"size>=0.9@size=4in"`` -> :class:`Requirement`.
+
+    The comparison must be the task's: ``<=`` for localization (an error),
+    ``>=`` for the accuracies; anything else is refused, never rewritten.
+    """
     m = _PATTERN.match(text)
     if not m:
         raise UserError(f"requirement {text!r} must look like loc<=0.05, shape>=0.35 or size>=0.9@lights=on")
-    task, value, col, val = m.groups()
+    task, op, value, col, val = m.groups()
+    want = "<=" if METRIC_OF_TASK[task][1] else ">="
+    if op != want:
+        what = "an error (smaller is better)" if want == "<=" else "an accuracy (larger is better)"
+        raise UserError(f"requirement {text!r}: {task}'s {METRIC_OF_TASK[task][0]} is {what}; "
+                        f"write {task}{want}{value}")
     try:
         threshold = float(value)
     except ValueError:

@@ -8,7 +8,9 @@ configuration and the optimize stage's candidates, rewritten atomically) and
 design, evaluator, fidelity, metric, interval, run time and status; one line
 appended and flushed per result). ``resume=True`` ingests everything in it,
 so nothing already evaluated is computed again. The simulated references are
-saved beside it and reused when their configuration matches.
+saved beside it and reused when their configuration matches; they, and the
+worlds' references (:mod:`~nlosplan.planner.design.worlds`), are simulated
+on the executor, one job per zone layout and world.
 """
 
 from __future__ import annotations
@@ -20,20 +22,24 @@ import os
 import platform
 import subprocess
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from nlosplan.data.load import load_dataset
+from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
+from nlosplan.files import write_bytes, write_text, writing
+from nlosplan.planner.design import robust
 from nlosplan.planner.design.cost import CostModel
-from nlosplan.planner.design.data import SceneSet, reference_from_dataset, simulate_reference
+from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.executors import make_executor
+from nlosplan.planner.design.jobs import ReferenceJob
 from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, optimize_jobs
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
-from nlosplan.planner.design.search import DesignSearch, SearchConfig
+from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
+from nlosplan.planner.design.worlds import WorldsConfig, draw_worlds, world_sensor
 from nlosplan.sensor_models import resolve_sensor
 
 __all__ = ["DesignConfig", "run_design", "read_evaluations", "CHECKPOINT", "EVALUATIONS"]
@@ -63,6 +69,8 @@ class DesignConfig:
         Preset or sensor file of the real captures (default: the space's reference).
     label : str
         ``"full"`` or ``"quick"`` (for the report).
+    worlds : WorldsConfig
+        The plausible worlds the cheapest met candidates are checked in (not with ``real``).
     """
 
     space: DesignSpace = field(default_factory=DesignSpace)
@@ -74,12 +82,14 @@ class DesignConfig:
     real_where: dict | None = None
     capture_sensor: str | None = None
     label: str = "full"
+    worlds: WorldsConfig = field(default_factory=WorldsConfig)
 
     def to_dict(self) -> dict:
         return {"space": self.space.to_dict(), "requirements": [r.to_dict() for r in self.requirements],
                 "cost": self.cost.to_dict(), "search": self.search.to_dict(),
                 "scenes": None if self.scenes is None else self.scenes.to_dict(), "real": self.real,
-                "real_where": self.real_where, "capture_sensor": self.capture_sensor, "label": self.label}
+                "real_where": self.real_where, "capture_sensor": self.capture_sensor, "label": self.label,
+                "worlds": self.worlds.to_dict()}
 
     def hash(self) -> str:
         return hashlib.sha1(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:12]
@@ -104,56 +114,126 @@ def provenance(cfg: DesignConfig, seconds: float, executor_name: str) -> dict:
             versions[pkg] = md.version(pkg)
         except md.PackageNotFoundError:
             versions[pkg] = "not installed"
-    return {"config": cfg.to_dict(), "config_hash": cfg.hash(), "seeds": list(range(cfg.search.seeds)),
+    return {"config": cfg.to_dict(), "config_hash": cfg.hash(), "seed": cfg.search.seed,
+            "seeds": f"evaluation seeds {cfg.search.seed} x {SEED_STRIDE} + i (i: a design's i-th run)",
             "versions": versions, "git_revision": _git_revision(), "wall_seconds": seconds,
             "executor": executor_name, "python": platform.python_version(), "machine": platform.machine(),
             "cpus": os.cpu_count()}
 
 
 def read_evaluations(path) -> list[dict]:
-    """The results in a ``design_evaluations.jsonl`` log, in order; a torn line (a killed run) is skipped."""
+    """The results in a ``design_evaluations.jsonl`` log, in order (a torn last line, a killed run's, is left out).
+
+    Raises
+    ------
+    UserError
+        A line before the last does not hold an evaluation (see :func:`check_log`).
+    """
+    return check_log(path).results
+
+
+def _evaluation(line: str) -> dict | None:
+    """The evaluation record of a log line, or None when the line is not one."""
+    try:
+        r = json.loads(line)
+    except json.JSONDecodeError:
+        return None
+    return r if isinstance(r, dict) and {"evaluator", "task", "design"} <= set(r) else None
+
+
+@dataclass
+class LogCheck:
+    """What a ``design_evaluations.jsonl`` holds: its results, damaged lines (1-based) and a torn tail."""
+
+    results: list[dict]
+    damaged: list[int]
+    torn_tail: bool
+    lines: list[str]
+
+
+def check_log(path, *, repair: bool = False) -> LogCheck:
+    """Read an evaluation log; damaged lines stop it unless ``repair``.
+
+    The last line without its newline is the evaluation a killed run was
+    writing: it is left out (and cut from the file when the run resumes).
+    Any other line that is not a JSON evaluation is damage: a UserError
+    names the lines, unless ``repair`` (then they are left out and reported
+    in ``damaged``).
+    """
     path = Path(path)
-    out = []
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:  # the line being written when the run was killed
-                continue
-    return out
+    if not path.exists():
+        return LogCheck([], [], False, [])
+    data = path.read_bytes()
+    torn = bool(data) and not data.endswith(b"\n")
+    lines = data.decode("utf-8", errors="replace").split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    results, damaged = [], []
+    for i, line in enumerate(lines, 1):
+        r = _evaluation(line)
+        if r is None:
+            if not (torn and i == len(lines)):  # the line a killed run was writing is not damage
+                damaged.append(i)
+            continue
+        results.append(r)
+    body = lines[:-1] if torn and _evaluation(lines[-1]) is None else lines
+    if damaged and not repair:
+        shown = ", ".join(map(str, damaged[:10])) + (f" and {len(damaged) - 10} more" if len(damaged) > 10 else "")
+        raise UserError(f"{path}: line(s) {shown} of {len(body)} are damaged (not an evaluation); rerun with --resume "
+                        "--repair to drop them (their evaluations run again), or restore the file")
+    return LogCheck(results, damaged, torn, body)
 
 
 class _Checkpoint:
     """``design_checkpoint.json`` (configuration, candidates) + ``design_evaluations.jsonl`` (one result per line).
 
     Results are appended and flushed one line at a time, so a killed run
-    loses at most the evaluation in flight; a torn last line is ignored.
+    loses at most the evaluation in flight. Starting over where a run's
+    files exist needs ``overwrite`` (they move to ``.bak``); resuming needs
+    a checkpoint; a damaged log needs ``repair`` (see :func:`check_log`).
     """
 
-    def __init__(self, path: Path, cfg: DesignConfig, resume: bool):
+    def __init__(self, path: Path, cfg: DesignConfig, resume: bool, *, overwrite: bool = False, repair: bool = False,
+                 say=None):
         self.path = path
         self.log = path.with_name(EVALUATIONS)
         self.data = {"config_hash": cfg.hash(), "config": cfg.to_dict(), "candidates": None, "optimize_log": []}
         self.results: list[dict] = []
-        if path.exists() and resume:
+        say = say or (lambda text: None)
+        if resume:
+            if not path.exists():
+                raise UserError(f"--resume: there is no run to resume in {path.parent} (no {path.name}); "
+                                "run without --resume to start one")
             try:
                 old = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError) as exc:
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
                 raise UserError(f"cannot read the checkpoint {path}: {exc}") from None
-            if old.get("config_hash") != cfg.hash():
+            if not isinstance(old, dict) or old.get("config_hash") != cfg.hash():
                 raise UserError(f"{path} is from a run with another configuration; use another --out, "
-                                "or run without --resume to start over (the old checkpoint is kept as .bak)")
+                                "or run with --overwrite to start over (the old files move to .bak)")
             self.data = old
-            self.results = read_evaluations(self.log)
+            check = check_log(self.log, repair=repair)
+            self.results = check.results
+            if check.damaged or check.torn_tail:  # rewrite the log without them, keeping the damaged one aside
+                if check.damaged:
+                    kept = write_bytes(self.log.with_name(self.log.name + ".damaged"), self.log.read_bytes())
+                    say(f"--repair: dropped damaged line(s) {', '.join(map(str, check.damaged))} of {self.log.name} "
+                        f"(their evaluations run again; the damaged file is kept as {kept.name})")
+                write_text(self.log, "".join(json.dumps(r, default=_json_default) + "\n" for r in self.results))
         else:
-            for old in (path, self.log):
-                if old.exists():
-                    old.replace(old.with_name(old.name + ".bak"))
+            if repair:
+                raise UserError("--repair applies only with --resume")
+            old = [p for p in (path, self.log) if p.exists()]
+            if old and not overwrite:
+                n = len(check_log(self.log, repair=True).results) if self.log.exists() else 0
+                raise UserError(f"{path.parent} holds a previous run ({n} evaluations); pass --resume to continue it, "
+                                "--overwrite to start over (its files move to .bak), or choose another --out")
+            for p in old:
+                p.replace(p.with_name(p.name + ".bak"))
+            if old:
+                say(f"--overwrite: the previous run's {', '.join(p.name for p in old)} moved to .bak")
             self.save()
-        torn = self.log.exists() and self.log.stat().st_size > 0 and not self.log.read_bytes().endswith(b"\n")
         self._fh = open(self.log, "a")
-        if torn:
-            self._fh.write("\n")  # end the torn line so the next result starts its own
 
     def add(self, result: dict) -> None:
         self.results.append(result)
@@ -161,9 +241,7 @@ class _Checkpoint:
         self._fh.flush()
 
     def save(self) -> None:
-        tmp = self.path.with_name(self.path.name + ".part")
-        tmp.write_text(json.dumps(self.data, default=_json_default))
-        tmp.replace(self.path)
+        write_text(self.path, json.dumps(self.data, default=_json_default))
 
     def close(self) -> None:
         self._fh.close()
@@ -177,23 +255,41 @@ def _json_default(o):
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
 
 
-def _references(cfg: DesignConfig, out: Path, say) -> tuple[dict, dict, dict]:
+def _layout_design(space: DesignSpace, layout) -> Design:
+    """The design a layout's reference is simulated at (least blur, all bins and photons of the space)."""
+    return Design(layout, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
+
+
+def _simulate(executor, jobs: list[ReferenceJob], say, what: str) -> dict:
+    """Run reference jobs on the executor (in parallel); ``label -> seconds``. A failure stops the run."""
+    out = {}
+    for i, (job, res) in enumerate(executor.map(build_reference, jobs)):
+        if res.get("status") != "ok":
+            raise RuntimeError(f"simulating the {job.label} reference failed: {res.get('reason')}")
+        out[job.label] = res["seconds"]
+        say(f"{what}: {job.label}", i + 1, len(jobs))
+    return out
+
+
+def _references(cfg: DesignConfig, out: Path, say, executor) -> tuple[dict, dict, dict]:
     """Simulated reference per zone layout (reused when saved with the same key); real ones if asked."""
     from nlosplan.planner.design.data import load_reference
 
-    sims, real, info = {}, {}, {}
+    sims, real, info, jobs = {}, {}, {}, []
     space, scenes = cfg.space, cfg.scenes
     for z in space.zones:
-        ref_design = Design(z, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
-        sensor = ref_design.sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
+        sensor = _layout_design(space, z).sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
         path = out / "reference" / f"{z[0]}x{z[1]}_{scenes.key(sensor)}.npz"
-        if not path.exists():
-            say(f"simulating the {z[0]}x{z[1]} reference")
-            simulate_reference(sensor, scenes, progress=say).save(path)
-        ref = load_reference(path)
         sims[f"{z[0]}x{z[1]}"] = path
-        info[f"{z[0]}x{z[1]}"] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
-                                   "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
+        if not path.exists():
+            jobs.append(ReferenceJob(str(path), sensor, scenes, f"{z[0]}x{z[1]}"))
+    if jobs:
+        say(f"references: simulating {len(jobs)} ({scenes.n_scenes} scenes each)")
+        _simulate(executor, jobs, say, "references")
+    for layout, path in sims.items():
+        ref = load_reference(path)
+        info[layout] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
+                        "seconds": ref.seconds, "source": f"{scenes.backend} simulator", "fidelity": scenes.fidelity}
     if cfg.real:
         captured = resolve_sensor(cfg.capture_sensor or space.reference)
         ds = load_dataset(cfg.real, {**(cfg.real_where or {}), "zones": f"{captured.zones_rows}x{captured.zones_cols}"},
@@ -219,8 +315,18 @@ def _stability(quick: bool) -> dict:
             "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
 
 
+def check_inputs(cfg: DesignConfig) -> None:
+    """What a run needs from outside, checked before any work: the real captures' store and sensor (one line each)."""
+    if cfg.real:
+        captured = resolve_sensor(cfg.capture_sensor or cfg.space.reference)
+        zones = f"{captured.zones_rows}x{captured.zones_cols}"
+        check_captures(cfg.real, {**(cfg.real_where or {}), "zones": zones}, drop_backgrounds=True,
+                       zones_hint="the real captures must have the capture sensor's zones (give the matching "
+                                  "--capture-sensor)")
+
+
 def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
-               cluster: str | None = None, progress=None) -> dict:
+               cluster: str | None = None, progress=None, overwrite: bool = False, repair: bool = False) -> dict:
     """Run the design search and summarize it.
 
     Parameters
@@ -229,63 +335,132 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     out : str or Path
         Output folder (checkpoint, references, report).
     resume : bool
-        Continue from ``OUT/design_checkpoint.json`` (same configuration).
+        Continue from ``OUT/design_checkpoint.json`` (same configuration); an error when there is none.
     workers : int, optional
         Local worker processes (default: the CPU count; 1 runs in this process).
     cluster : str, optional
         ``tcp://HOST:PORT`` or ``local:N`` (Dask) instead of the local pool.
     progress : callable, optional
-        ``progress(text, done, total)`` after each step.
+        ``progress(text, done, total)`` after each step; ``text`` starts with the stage (``references``,
+        ``grid``, ``refine``, ``optimize``, ``verify``, ...) and a colon; ``done``/``total`` count the
+        evaluations done and planned so far (None where not counted).
+    overwrite : bool
+        Start over where a previous run's files are (they move to ``.bak``); without it that is an error.
+    repair : bool
+        With ``resume``: drop damaged lines of the evaluation log (else they stop the run with their numbers).
 
     Returns
     -------
     dict
         :func:`~nlosplan.planner.design.summary.summarize`'s result plus
         ``provenance``, ``references``, ``stability`` and ``checkpoint``.
+
+    Raises
+    ------
+    UserError
+        Before any work: nothing to resume, a previous run without ``overwrite``, a damaged log without
+        ``repair``, unusable real captures or capture sensor, an unreachable cluster.
     """
     t0 = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
-    ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume)
-    sims, real, ref_info = _references(cfg, out, say)
-    search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None)
+    check_inputs(cfg)
+    worlds = None if cfg.real else _world_plan(cfg)  # a bad calibration uncertainty stops the run before any work
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume, overwrite=overwrite, repair=repair,
+                       say=lambda text: say(f"checkpoint: {text}"))
+    try:
+        executor = make_executor(workers, cluster)
+    except BaseException:
+        ckpt.close()
+        raise
+    try:
+        with writing(kept=f"every evaluation finished so far is kept in {ckpt.log}",
+                     cont="free some space and rerun with --resume"):
+            result, stability = _search(cfg, out, ckpt, executor, say, worlds)
+        executor_name = executor.name
+    finally:
+        executor.close()
+        ckpt.close()
+    result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=result.pop("_refs"),
+                  stability=stability, checkpoint=str(out / CHECKPOINT))
+    return result
+
+
+def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
+            worlds: robust.WorldPlan | None) -> tuple[dict, dict | None]:
+    """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
+    sims, real, ref_info = _references(cfg, out, say, executor)
+    if worlds is not None and cfg.worlds.scene_step == 1:  # the worlds' scenes are the run's: world 0 is its own
+        worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
+    search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None, worlds)
     search.ingest(ckpt.results)
     if ckpt.data.get("candidates") is not None:
         cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
                  for k, v in ckpt.data["candidates"].items()}
         search.stage = "optimize"
-    executor = make_executor(workers, cluster)
-    try:
-        done = len(ckpt.results)
-        stability = None
-        while True:
-            jobs = search.suggest()
-            if not jobs and search.stage == "optimize":
-                if ckpt.data.get("candidates") is None:
-                    say("optimizing per discrete choice (nlopt COBYLA on the corrected bound)")
-                    log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
-                    cands = collect_candidates(search, log, cfg.search.candidates)
-                    ckpt.data["candidates"] = cands
-                    ckpt.data["optimize_log"] = log
-                    ckpt.save()
-                search.set_candidates(cands, ckpt.data["optimize_log"])
+    done = len(ckpt.results)
+    while True:
+        jobs = search.suggest()
+        if not jobs and search.stage == "optimize":
+            if ckpt.data.get("candidates") is None:
+                say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
+                log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
+                cands = collect_candidates(search, log, cfg.search.candidates)
+                ckpt.data["candidates"] = cands
+                ckpt.data["optimize_log"] = log
+                ckpt.save()
+            search.set_candidates(cands, ckpt.data["optimize_log"])
+            continue
+        if not jobs and search.stage == "worlds" and worlds is not None:
+            need = robust.needed_references(search)
+            if need:
+                search.add_world_references(_world_references(cfg, out, worlds, need, executor, say))
                 continue
-            if not jobs:
-                break
-            total = done + len(jobs)
-            for _, result in executor.map(evaluate, jobs):
-                search.ingest([result])
-                ckpt.add(result)
-                done += 1
-                say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
-                    done, total)
-        stability = _stability(cfg.label.startswith("quick"))
-        executor_name = executor.name
-    finally:
-        executor.close()
-        ckpt.close()
+        if not jobs:
+            break
+        total = done + len(jobs)
+        say(f"{search.stage}: {len(jobs)} evaluations", done, total)
+        for _, result in executor.map(evaluate, jobs):
+            search.ingest([result])
+            ckpt.add(result)
+            done += 1
+            say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
+                done, total)
+    say("stability: the catalog" if not cfg.label.startswith("quick") else "summary: writing")
+    stability = _stability(cfg.label.startswith("quick"))
     result = summarize(search)
-    result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=ref_info,
-                  stability=stability, checkpoint=str(out / CHECKPOINT))
-    return result
+    result["_refs"] = ref_info
+    return result, stability
+
+
+def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
+    """The run's worlds (drawn from its seed) and their scenes."""
+    from nlosplan.sensor_models.uncertainty import uncertainty_for
+
+    space, wcfg = cfg.space, cfg.worlds
+    unc, unc_source = uncertainty_for(space.reference)
+    worlds = draw_worlds(wcfg, space.sensor, cfg.scenes.lights, cfg.search.seed, unc)
+    step = wcfg.scene_step
+    scenes = replace(cfg.scenes, positions=cfg.scenes.positions[::step], crlb_objects=())
+    ranges = [r for r in wcfg.resolved_ranges(cfg.scenes.lights) if r.name not in (unc or {}).get("parameters", {})]
+    sources = [f"declared ranges: {', '.join(r.name for r in ranges)}" if ranges else "no declared ranges",
+               f"calibrated: {', '.join(unc['parameters'])} ({unc_source})" if unc else f"no calibration ({unc_source})"]
+    return robust.WorldPlan(wcfg, worlds, scenes, cfg.scenes.n_scenes / scenes.n_scenes, sources=sources)
+
+
+def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need, executor, say) -> dict:
+    """Simulate the references ``need`` lists (``(world, layout)``) on the executor; ``(index, layout) -> path``."""
+    from nlosplan.planner.design.space import parse_zones
+
+    jobs, paths = [], {}
+    for w, layout in need:
+        sensor = world_sensor(_layout_design(cfg.space, parse_zones(layout)), cfg.space.sensor, w.sensor)
+        sensor = sensor.replace(name=f"reference {layout}, world {w.index}")
+        scenes = replace(plan.scenes, scene_kwargs=w.scene)
+        path = out / "reference" / f"world{w.index}_{layout}_{scenes.key(sensor)}.npz"
+        paths[(w.index, layout)] = str(path)
+        jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
+    say(f"worlds: simulating {len(jobs)} reference(s) ({plan.scenes.n_scenes} scenes each)")
+    _simulate(executor, jobs, say, "worlds")
+    return paths

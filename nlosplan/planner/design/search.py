@@ -9,41 +9,70 @@ again). Stages:
 1. **screen** — the fast bounds (CRLB, ideal observer) on one-at-a-time grids
    along every axis from the reference design, and along jitter and photon
    budget for every zone layout (the trade-off curves).
-2. **curves** — trained models at the grid points whose bound meets the
+2. **learners** — every candidate model (``models``: MLP and 1D CNN by
+   default) trained on the reference design over ``seeds`` seeds; the best
+   of each task is its *learner*, used for every trained evaluation after.
+3. **curves** — the learner at the grid points whose bound meets the
    requirement (a design that fails its bound fails every model: it is
-   recorded as screened out, not trained).
-3. **refine** — bisection on the continuous axes (jitter, pulse, photons) and bins,
+   recorded as screened out, not trained). Along the axes the metric is
+   monotone in (:data:`MONOTONE`) a line is trained from its costliest end,
+   and stops where the learner's verdict is *not met*: every cheaper design
+   of the line fails too (recorded as implied, not trained).
+4. **refine** — bisection on the continuous axes (jitter, pulse, photons) and bins,
    between the last grid point that meets a requirement and the first that
    does not (the metric is monotone in them), ``refine_steps`` times.
-4. **optimize** — for every discrete choice (zones x bin width) and task,
+5. **optimize** — for every discrete choice (zones x bin width) and task,
    nlopt COBYLA over normalized continuous variables (jitter, log photons,
    bins) minimizes the cost subject to the bound corrected by the
-   bound-to-trained gap measured in stages 1-3 (multi-fidelity).
-5. **verify** — the cheapest candidates per task with trained models over
-   ``seeds`` seeds.
+   bound-to-trained gap measured in stages 1-4 (multi-fidelity).
+6. **verify** — the cheapest candidates per requirement (optimized, and the
+   cheapest scanned designs not already failed) over ``seeds`` seeds.
+7. **decide** — the cheapest candidate whose verdict is *undecided*
+   (:mod:`~nlosplan.planner.design.verdicts`) gets one more seed (new noise,
+   split and training seed) per round, until it is decided, reaches
+   ``max_seeds`` or the run's ``budget`` of extra evaluations is spent.
+8. **worlds** — the cheapest met candidates in the plausible worlds
+   (:mod:`~nlosplan.planner.design.worlds`, :mod:`~nlosplan.planner.design.robust`).
+
+Seeds: evaluation ``i`` of a design uses seed ``seed * 1000 + i`` (``seed``:
+the run's ``--seed``), so two runs with different seeds draw new noise, new
+splits and new training seeds everywhere.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
 from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, Spread, metric_to_score, pooled_spread,
+                                              score_to_metric, seed_interval, verdict)
 
 __all__ = ["SearchConfig", "DesignSearch", "axis_grid", "CONTINUOUS", "MORE_IS_BETTER", "metric_to_score",
-           "score_to_metric"]
+           "score_to_metric", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
+
+#: The largest run seed (``--seed``): evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``),
+#: and they must stay below 2**32, scikit-learn's limit on the split's ``random_state``.
+MAX_SEED = 1_000_000
+SEED_STRIDE = 1000
+#: Candidate learners of the trained evaluator (the best per task is used).
+DEFAULT_MODELS = ("mlp", "cnn1d")
 
 CONTINUOUS = ("jitter_fwhm_ps", "pulse_fwhm_ps", "photon_fraction")
 #: Axes along which a larger value is more (better, costlier) hardware.
 MORE_IS_BETTER = {"zones": True, "bin_factor": False, "n_bins": True, "jitter_fwhm_ps": False,
                   "pulse_fwhm_ps": False, "photon_fraction": True}
 _CURVE_AXES = ("jitter_fwhm_ps", "photon_fraction")  # also per zone layout
+#: Axes the learner's metric is taken to be monotone in (bisection; implied verdicts on the curves).
+MONOTONE = CONTINUOUS + ("n_bins",)
 
 
 @dataclass(frozen=True)
@@ -57,13 +86,22 @@ class SearchConfig:
     refine_steps : int
         Bisection steps after the grid.
     seeds : int
-        Seeds of the verification.
+        Seeds of the verification (and of the learners on the reference design).
     candidates : int
-        Cheapest candidates verified per task.
+        Cheapest candidates verified per task (optimized, and as many scanned).
     optimize_evals : int
         COBYLA evaluations per discrete choice.
     fidelity : dict
         Knobs per evaluator (see :data:`~nlosplan.planner.design.evaluators.DEFAULT_FIDELITY`).
+    seed : int
+        The run's seed, 0 to :data:`MAX_SEED` (``--seed``).
+    models : tuple of str
+        Candidate learners (:data:`~nlosplan.tasks.names.MODEL_NAMES`); the best on the reference design
+        is used per task.
+    max_seeds : int
+        Most seeds of one design (and of one design in one world) while it is undecided.
+    budget : int
+        Extra evaluations the run may spend deciding undecided candidates (decide and worlds stages).
     """
 
     grid_points: int = 6
@@ -72,9 +110,34 @@ class SearchConfig:
     candidates: int = 2
     optimize_evals: int = 15
     fidelity: dict = field(default_factory=lambda: {k: dict(v) for k, v in DEFAULT_FIDELITY.items()})
+    seed: int = 0
+    models: tuple = DEFAULT_MODELS
+    max_seeds: int = 8
+    budget: int = 30
+
+    def __post_init__(self) -> None:
+        from nlosplan.tasks.names import MODEL_NAMES, check_names
+
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
+            raise UserError(f"seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
+        for name, lo in (("grid_points", 2), ("refine_steps", 0), ("seeds", 1), ("candidates", 1),
+                         ("optimize_evals", 1), ("budget", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise UserError(f"[search] {name}={v!r} must be a whole number >= {lo}")
+        if isinstance(self.max_seeds, bool) or not isinstance(self.max_seeds, int) or not \
+                self.seeds <= self.max_seeds <= SEED_STRIDE // 10:
+            raise UserError(f"[search] max_seeds={self.max_seeds!r} must be a whole number from seeds "
+                            f"({self.seeds}) to {SEED_STRIDE // 10}")
+        models = (self.models,) if isinstance(self.models, str) else tuple(self.models)
+        object.__setattr__(self, "models", tuple(check_names("model(s)", models, MODEL_NAMES)))
+
+    def seed_of(self, i: int) -> int:
+        """The evaluation seed of a design's ``i``-th run."""
+        return self.seed * SEED_STRIDE + int(i)
 
     def to_dict(self) -> dict:
-        return dict(self.__dict__)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
 
 
 def axis_grid(space: DesignSpace, axis: str, points: int, base: Design) -> list[Design]:
@@ -114,10 +177,15 @@ class DesignSearch:
     trained_references : dict, optional
         Zone layout -> reference of real captures for the trained evaluator
         (default: the simulated ``references``).
+    worlds : WorldPlan, optional
+        The plausible worlds to check the cheapest met candidates in
+        (:class:`~nlosplan.planner.design.robust.WorldPlan`); none: no worlds stage.
     """
 
+    STAGES = ("screen", "learners", "curves", "refine", "optimize", "verify", "decide", "worlds", "done")
+
     def __init__(self, space: DesignSpace, requirements, config: SearchConfig, references: dict,
-                 cost: CostModel | None = None, trained_references: dict | None = None):
+                 cost: CostModel | None = None, trained_references: dict | None = None, worlds=None):
         self.space, self.requirements, self.config = space, list(requirements), config
         self.references = dict(references)
         self.trained_references = dict(trained_references or references)
@@ -128,16 +196,28 @@ class DesignSearch:
         self._optimized = False
         self.candidates: dict[str, list[dict]] = {}
         self.optimize_log: list[dict] = []
+        self.worlds = worlds
+        self._learners: dict[str, str] = {}
+        self._version = 0
+        self._spreads: dict = {}
 
     # ---------------------------------------------------------------- jobs
     def _layout(self, d: Design) -> str:
         return f"{d.zones[0]}x{d.zones[1]}"
 
-    def job(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> DesignJob:
+    def job(self, evaluator: str, req: Requirement, d: Design, seed: int = 0, *, model: str | None = None,
+            reference: str | None = None, world: dict | None = None) -> DesignJob:
+        """The job of ``d``'s ``seed``-th run (an index: the evaluation seed is :meth:`SearchConfig.seed_of` it).
+
+        Trained jobs use ``model`` (default: the task's learner); ``reference`` and ``world`` place the job
+        in a world (see :mod:`~nlosplan.planner.design.robust`).
+        """
         refs = self.trained_references if evaluator == "trained" else self.references
-        return DesignJob(evaluator, req.task, d, int(seed),
-                         self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator], req.condition,
-                         str(refs[self._layout(d)]), self.space.sensor.to_dict())
+        fid = self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator]
+        if evaluator != "bound":
+            fid = {**fid, "model": model or self.learner(req.task)}
+        return DesignJob(evaluator, req.task, d, self.config.seed_of(seed), fid, req.condition,
+                         str(reference or refs[self._layout(d)]), self.space.sensor.to_dict(), world)
 
     def result(self, evaluator: str, req: Requirement, d: Design, seed: int = 0) -> dict | None:
         return self.results.get(self.job(evaluator, req, d, seed).key)
@@ -165,6 +245,7 @@ class DesignSearch:
         """Record evaluation results (ok, unreachable or failed), in order."""
         for result in results:
             self.results[result["key"]] = result
+            self._version += 1
 
     def _new(self, jobs: list[DesignJob]) -> list[DesignJob]:
         seen, out = set(), []
@@ -189,11 +270,15 @@ class DesignSearch:
                 return []
 
     def _stage_jobs(self) -> list[DesignJob]:
+        from nlosplan.planner.design import robust
+
         if self.stage == "screen":
             return [self.job("bound", r, d) for r in self.requirements for d in self._line_designs()]
+        if self.stage == "learners":
+            return [self.job("trained", r, self.base, s, model=m) for r in self._task_requirements()
+                    for m in self.config.models for s in range(self.config.seeds)]
         if self.stage == "curves":
-            return [self.job("trained", r, d) for r in self.requirements for d in self._line_designs()
-                    if self.bound_meets(r, d)]
+            return self._curve_jobs()
         if self.stage == "refine":
             return self._refine_jobs()
         if self.stage == "verify":
@@ -202,14 +287,66 @@ class DesignSearch:
             if self.has_real:  # the same designs trained on simulated captures: where do sim and real disagree?
                 jobs += [self.job("trained_sim", r, d) for r in self.requirements for d in self.trained_designs(r)]
             return jobs
+        if self.stage == "decide":
+            return self._decide_jobs()
+        if self.stage == "worlds" and self.worlds is not None:
+            return robust.world_jobs(self)
         return []
 
     def _advance(self) -> bool:
-        order = ["screen", "curves", "refine", "optimize", "verify", "done"]
+        from nlosplan.planner.design import robust
+
         if self.stage == "done" or (self.stage == "optimize" and not self._optimized):
             return False  # optimize runs in the driver (see run.py), which then calls set_candidates
-        self.stage = order[order.index(self.stage) + 1]
+        if self.stage == "worlds" and self.worlds is not None and robust.needed_references(self):
+            return False  # the driver simulates the worlds' references, then calls add_world_references
+        self.stage = self.STAGES[self.STAGES.index(self.stage) + 1]
         return True
+
+    # ------------------------------------------------------------- learners
+    def _task_requirements(self) -> list[Requirement]:
+        """The first requirement of each task (its condition is the one learners are compared on)."""
+        return list({r.task: r for r in reversed(self.requirements)}.values())[::-1]
+
+    def learner(self, task: str) -> str:
+        """The task's learner: the candidate model with the best mean metric on the reference design.
+
+        Until every candidate has run its seeds there, the first of ``models``.
+        """
+        if task in self._learners:
+            return self._learners[task]
+        models = self.config.models
+        req = next((r for r in self._task_requirements() if r.task == task), None)
+        if len(models) == 1 or req is None:
+            return models[0]
+        means = {}
+        for m in models:
+            recs = [self.results.get(self.job("trained", req, self.base, s, model=m).key)
+                    for s in range(self.config.seeds)]
+            if any(r is None for r in recs):
+                return models[0]
+            vals = [r["value"] for r in recs if r["status"] == "ok" and math.isfinite(r["value"])]
+            if vals:
+                means[m] = float(np.mean(vals))
+        best = models[0] if not means else min(means, key=lambda m: (means[m] if req.smaller_is_better
+                                                                      else -means[m], models.index(m)))
+        self._learners[task] = best
+        return best
+
+    def learner_table(self) -> list[dict]:
+        """Every candidate model on the reference design, per task: mean metric, interval, seconds, chosen."""
+        rows = []
+        for req in self._task_requirements():
+            chosen = self.learner(req.task)
+            for m in self.config.models:
+                recs = [self.results.get(self.job("trained", req, self.base, s, model=m).key)
+                        for s in range(self.config.max_seeds)]
+                tv = seed_interval(req, [r for r in recs if r is not None], self.spread(req))
+                rows.append({"task": req.task, "requirement": req.name, "model": m, "chosen": m == chosen,
+                             **({"value": tv["value"], "lo": tv["lo"], "hi": tv["hi"], "seeds": tv["seeds"],
+                                 "seconds_per_run": tv["seconds"] / tv["seeds"]} if tv else
+                                {"value": None, "lo": None, "hi": None, "seeds": 0, "seconds_per_run": None})})
+        return rows
 
     # --------------------------------------------------------------- stages
     @property
@@ -218,9 +355,10 @@ class DesignSearch:
         return self.trained_references != self.references
 
     def trained_designs(self, req: Requirement) -> list[Design]:
-        """Designs with a successful trained evaluation for ``req``'s task."""
+        """Designs with a successful trained evaluation for ``req``'s task (nominal model)."""
         return sorted({Design.from_dict(r["design"]) for r in self.results.values()
-                       if r["task"] == req.task and r["evaluator"] == "trained" and r["status"] == "ok"})
+                       if r["task"] == req.task and r["evaluator"] == "trained" and r["status"] == "ok"
+                       and r.get("world") is None})
 
     def disagreements(self, req: Requirement) -> list[dict]:
         """Real against simulated trained metrics of the same designs (real backend only).
@@ -245,28 +383,58 @@ class DesignSearch:
         best = r["lo"] if req.smaller_is_better else r["hi"]
         return _met(req, best)
 
-    def trained_value(self, req: Requirement, d: Design) -> dict | None:
-        """Mean trained metric over the seeds evaluated, with its interval (None if never trained)."""
-        recs = [self.results[k] for k in self._seed_keys(req, d) if k in self.results]
-        recs = [r for r in recs if r["status"] == "ok" and math.isfinite(r["value"])]
-        if not recs:
-            return None
-        vals = np.array([r["value"] for r in recs])
-        k = len(vals)
-        # interval of the seed average: within-seed (bootstrap) and between-seed variance, normal approximation
-        se_within = np.array([(r["hi"] - r["lo"]) / (2 * 1.96) for r in recs])
-        var_between = vals.var(ddof=1) if k >= 2 else 0.0
-        half = 1.96 * math.sqrt(float(np.mean(se_within ** 2)) / k + var_between / k)
-        lo, hi = vals.mean() - half, vals.mean() + half
-        if not req.smaller_is_better:
-            lo, hi = max(lo, 0.0), min(hi, 1.0)
-        else:
-            lo = max(lo, 0.0)
-        return {"value": float(vals.mean()), "lo": float(lo), "hi": float(hi), "seeds": len(vals),
-                "seconds": float(sum(r["seconds"] for r in recs))}
+    def spread(self, req: Requirement) -> Spread:
+        """The run-to-run variance of the requirement's metric (the learner's, nominal model), pooled over designs."""
+        key = (req.task, str(req.condition), self._version)
+        if key not in self._spreads:
+            groups: dict = {}
+            model, cond = self.learner(req.task), None if req.condition is None else str(req.condition)
+            for r in self.results.values():
+                if (r["evaluator"] == "trained" and r["task"] == req.task and r.get("world") is None
+                        and r.get("condition") == cond and r["fidelity"].get("model") == model
+                        and r["status"] == "ok"):
+                    groups.setdefault(json.dumps(r["design"], sort_keys=True), []).append(r["value"])
+            self._spreads = {k: v for k, v in self._spreads.items() if k[2] == self._version}
+            self._spreads[key] = pooled_spread(req, groups.values())
+        return self._spreads[key]
 
-    def _seed_keys(self, req, d):
-        return [self.job("trained", req, d, s).key for s in range(max(self.config.seeds, 1))]
+    def runs(self, req: Requirement, d: Design, evaluator: str = "trained") -> list[dict]:
+        """The learner's finished runs of ``d`` (nominal model), in seed order."""
+        out = []
+        for s in range(self.config.max_seeds):
+            r = self.results.get(self.job(evaluator, req, d, s).key)
+            if r is not None:
+                out.append(r)
+        return out
+
+    def trained_value(self, req: Requirement, d: Design) -> dict | None:
+        """Mean trained metric over the seeds run, with the 95 % interval of that mean and its ``verdict``.
+
+        See :func:`~nlosplan.planner.design.verdicts.seed_interval` (None if never trained).
+        """
+        tv = seed_interval(req, self.runs(req, d), self.spread(req))
+        if tv is not None:
+            tv["verdict"] = verdict(req, tv["lo"], tv["hi"])
+        return tv
+
+    def _curve_jobs(self) -> list[DesignJob]:
+        """Trained jobs of the curves: every bound-passing point of a line, or on a monotone axis the costliest
+        point not yet trained, until one is not met (one per line and round)."""
+        jobs = []
+        for req in self.requirements:
+            for axis, _, _, designs in self.lines():
+                pts = [d for d in designs if self.bound_meets(req, d)]
+                if axis not in MONOTONE:
+                    jobs += [self.job("trained", req, d) for d in pts]
+                    continue
+                for d in sorted(pts, key=lambda d: d.value(axis, self.space.sensor), reverse=MORE_IS_BETTER[axis]):
+                    tv = self.trained_value(req, d)
+                    if tv is None:
+                        jobs.append(self.job("trained", req, d))
+                        break
+                    if tv["verdict"] == NOT_MET:
+                        break
+        return jobs
 
     def _refine_jobs(self) -> list[DesignJob]:
         jobs = []
@@ -276,7 +444,7 @@ class DesignSearch:
                     continue
                 pts = self.line_points(req, axis, base)
                 grid = set(designs)
-                if sum(p["design"] not in grid and (p["trained"] is not None or p["screened"])
+                if sum(p["design"] not in grid and (p["trained"] is not None or p["screened"] or p["implied"])
                        for p in pts) >= self.config.refine_steps:
                     continue
                 bracket = _bracket(pts, req, MORE_IS_BETTER[axis])
@@ -298,11 +466,82 @@ class DesignSearch:
                         jobs.append(self.job("trained", req, d))
         return jobs
 
+    # --------------------------------------------------------------- decide
+    def extra_spent(self) -> int:
+        """Extra evaluations spent deciding (seeds beyond ``seeds`` in the nominal model, beyond 1 in worlds)."""
+        n, base = 0, self.config.seed_of(0)
+        for r in self.results.values():
+            if r["evaluator"] == "trained":
+                i = r["seed"] - base
+                n += i >= (1 if r.get("world") is not None else self.config.seeds)
+        return n
+
+    def budget_left(self) -> int:
+        return max(0, self.config.budget - self.extra_spent())
+
+    def ordered_candidates(self, req: Requirement) -> list[dict]:
+        """The requirement's candidates, cheapest first, each with ``cost`` and ``trained`` (its value or None)."""
+        out = []
+        for c in self.candidates.get(req.name, []):
+            d = c["design"]
+            out.append({**c, "cost": self.cost(d, self.space), "trained": self.trained_value(req, d)})
+        return sorted(out, key=lambda c: (c["cost"], c["design"]))
+
+    def _decide_jobs(self) -> list[DesignJob]:
+        jobs, left = [], self.budget_left()
+        for req in self.requirements:
+            for c in self.ordered_candidates(req):
+                tv = c["trained"]
+                if tv is not None and tv["verdict"] == MET:
+                    break
+                if tv is not None and tv["verdict"] == UNDECIDED:
+                    if tv["seeds"] < self.config.max_seeds and len(jobs) < left:
+                        jobs.append(self.job("trained", req, c["design"], len(self.runs(req, c["design"]))))
+                    break  # one per requirement and round: the cheapest undecided
+        return jobs
+
+    def decision(self, req: Requirement, tv: dict | None) -> str:
+        """Why a verified candidate's verdict stands: decided, or undecided and which limit stopped it."""
+        if tv is None:
+            return "not evaluated"
+        if tv["verdict"] != UNDECIDED:
+            return f"{tv['verdict']} after {tv['seeds']} seed(s)"
+        if tv["seeds"] >= self.config.max_seeds:
+            return f"undecided after {tv['seeds']} seeds: max_seeds ({self.config.max_seeds}) reached"
+        if self.budget_left() <= 0:
+            return (f"undecided after {tv['seeds']} seed(s): the budget of {self.config.budget} extra evaluations "
+                    "is spent")
+        if self.stage in ("decide", "worlds", "done"):
+            return f"undecided after {tv['seeds']} seed(s): a cheaper candidate was decided met first"
+        return f"undecided after {tv['seeds']} seed(s): the run stopped before the decide stage"
+
+    def scan_candidates(self, req: Requirement, n: int) -> list[dict]:
+        """The ``n`` cheapest scanned designs whose mean meets ``req``, and the cheapest met one if not among them.
+
+        When no mean meets it, the undecided design closest to meeting it (so that seeds can decide it).
+        """
+        rows, undecided = [], []
+        for d in self.trained_designs(req):
+            tv = self.trained_value(req, d)
+            if tv is None:
+                continue
+            if req.met(tv["value"]):
+                rows.append((self.cost(d, self.space), d, tv["verdict"]))
+            elif tv["verdict"] == UNDECIDED:
+                undecided.append((-req.margin(tv["value"]), self.cost(d, self.space), d))
+        rows.sort(key=lambda r: (r[0], r[1]))
+        picked = [(c, d) for c, d, _ in rows[:n]] + [(c, d) for c, d, v in rows[n:] if v == MET][:1]
+        if not rows and undecided:
+            _, c, d = min(undecided, key=lambda u: (u[0], u[1], u[2]))
+            picked = [(c, d)]
+        return [{"design": d, "cost": c, "source": "scans"} for c, d in picked]
+
     def line_points(self, req: Requirement, axis: str, base: Design) -> list[dict]:
         """Every evaluated design on the line through ``base`` along ``axis``, sorted by the axis value.
 
         Each point: ``x`` (axis value in its unit), ``design``, ``bound`` (value or None),
-        ``trained`` (:meth:`trained_value` or None), ``screened`` (the bound failed).
+        ``trained`` (:meth:`trained_value` or None), ``screened`` (the bound failed), ``implied`` (not
+        trained: a costlier design of the line, on a :data:`MONOTONE` axis, is not met).
         """
         pts = {}
         for r in self.results.values():
@@ -324,7 +563,12 @@ class DesignSearch:
                       "bound_reason": "" if bound is None else bound["reason"],
                       "trained": self.trained_value(req, d),
                       "screened": bound is not None and bound["status"] == "ok" and not self.bound_meets(req, d)}
-        return sorted(pts.values(), key=lambda p: p["x"])
+        out = sorted(pts.values(), key=lambda p: p["x"])
+        failed = [p["x"] for p in out if p["trained"] is not None and p["trained"]["verdict"] == NOT_MET]
+        for p in out:
+            p["implied"] = (axis in MONOTONE and p["trained"] is None and not p["screened"] and any(
+                (x > p["x"]) == MORE_IS_BETTER[axis] and x != p["x"] for x in failed))
+        return out
 
     # ------------------------------------------------------- multi-fidelity
     def gap(self, req: Requirement) -> dict:
@@ -354,25 +598,14 @@ class DesignSearch:
         self.optimize_log = log
         self._optimized = True
 
-
-def metric_to_score(req: Requirement, v: float) -> float:
-    """The scale the gap and interpolation work on: log RMSE, or logit accuracy (clipped to [0.001, 0.999])."""
-    if req.smaller_is_better:
-        return math.log(max(v, 1e-9))
-    p = min(max(v, 1e-3), 1 - 1e-3)
-    return math.log(p / (1 - p))
-
-
-def score_to_metric(req: Requirement, z: float) -> float:
-    """Inverse of :func:`metric_to_score`."""
-    if req.smaller_is_better:
-        return math.exp(z)
-    return 1.0 / (1.0 + math.exp(-z))
+    def add_world_references(self, paths: dict) -> None:
+        """``(world index, layout) -> path`` of simulated world references (see :mod:`.robust`)."""
+        self.worlds.references.update(paths)
 
 
 def _bracket(points: list[dict], req: Requirement, more_is_better: bool):
     """Adjacent axis values (meets, misses) by the trained metric, or None."""
-    seq = [p for p in points if p["trained"] is not None or p["screened"]]
+    seq = [p for p in points if p["trained"] is not None or p["screened"] or p.get("implied")]
     if not more_is_better:
         seq = seq[::-1]  # walk from the cheapest end (more jitter) to the costliest
     # now: along seq hardware increases; find the first index that meets

@@ -1,0 +1,46 @@
+"""Start-up of a design worker process: one thread per worker, and an end with the process that started it."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+__all__ = ["WATCH_PARENT_S", "init_worker"]
+
+#: Seconds between a worker's checks that the process which started it is still there.
+WATCH_PARENT_S = 0.5
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Make this worker end when the process ``parent`` that started it ends (also on its kill -9).
+
+    A daemon thread polls the parent every :data:`WATCH_PARENT_S` seconds and
+    ends the process when it is gone (the worker is then re-parented), so
+    no worker, nor the multiprocessing resource tracker the workers keep
+    open, outlives an interrupted run. A thread, not ``PR_SET_PDEATHSIG``:
+    that signal follows the parent *thread* that started the process, and
+    pools start workers from helper threads.
+    """
+    def watch() -> None:
+        while True:
+            time.sleep(WATCH_PARENT_S)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=watch, name="nlosplan-parent-watch", daemon=True).start()
+
+
+def init_worker(parent: int | None = None) -> None:
+    """Worker start-up: one thread per worker (the pool provides the parallelism); end with ``parent``."""
+    if parent is not None:
+        _exit_with_parent(parent)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover - torch is a dependency
+        pass
