@@ -64,6 +64,7 @@ class PlanStatic:
     spads: int = 1
     dead_time_ps: float | None = None
     walk_ps: float = 0.0
+    deposit: str = "window"
 
 
 @dataclass(frozen=True)
