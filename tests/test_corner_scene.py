@@ -46,7 +46,8 @@ def test_patch_centre_size_and_normal():
     np.testing.assert_allclose(_patch_normal(s), [0, 1, 0], atol=1e-15)
     assert (o.reflectance, o.albedo) == ("retroreflective", 0.4)
     assert s.meta == {"preset": "corner", "object": "patch", "object_xy": [0.3, 0.2], "wall_distance": 0.5,
-                      "reflectance": "retroreflective", "albedo": 0.4, "lobe_fwhm_deg": 2.0, "object_yaw_deg": 0.0,
+                      "reflectance": "retroreflective", "albedo": 0.4, "diffuse_albedo": 0.0, "lobe_fwhm_deg": 2.0,
+                      "object_yaw_deg": 0.0,
                       "object_size": 0.1, "lights": "off"}
 
 

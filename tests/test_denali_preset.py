@@ -203,10 +203,12 @@ def test_lights(lights, on):
 
 def test_mount_and_reflectance_options():
     s = denali_scene("3", "4in", 42, "on", mount=True, reflectance="lambertian", albedo=0.2, tables=False)
-    obj, mount = s.objects
-    assert (obj.reflectance, obj.albedo) == ("lambertian", 0.2)
-    assert (mount.reflectance, mount.albedo) == ("lambertian", 0.8)
+    obj, mount, plate = s.objects   # the mount is the post and the plate the object sits on (two fixtures)
+    assert (obj.reflectance, obj.albedo, obj.fixture) == ("lambertian", 0.2, False)
+    assert (mount.reflectance, mount.albedo, mount.fixture) == ("lambertian", 0.8, True)
+    assert (plate.reflectance, plate.albedo, plate.fixture) == ("lambertian", 0.8, True)
     np.testing.assert_array_equal(mount.to_world, obj.to_world)
+    assert s.meta["mount"] is True and s.meta["mount_albedo"] == 0.8
     assert s.planes == () and s.meta["reflectance"] == "lambertian"
     # the mount post hangs below the object towards the tables
     assert mount.world_vertices()[:, 2].min() < 0.05 < obj.world_vertices()[:, 2].min()

@@ -113,7 +113,7 @@ def design_run(tmp_path_factory):
 
 
 def test_progress_from_the_files_agrees_with_the_run_at_every_evaluation(design_run, tmp_path):
-    from nlosplan.planner.design.progress import design_progress
+    from nlosplan.planner.design.progress import STAGES, design_progress
     from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, read_evaluations
 
     out, result, events = design_run
@@ -127,8 +127,16 @@ def test_progress_from_the_files_agrees_with_the_run_at_every_evaluation(design_
     for text, done, total in events:
         if done is None or done == total:     # a stage's last result: the next stage is planned after it
             continue
+        if text.split(":")[0] in ("references", "world references"):   # these count simulations, not evaluations
+            continue
+        if STAGES.index(text.split(":")[0]) >= STAGES.index("optimize"):   # the copy's checkpoint is before optimize
+            break
         p = design_progress(live, logged[:done])
-        assert (p["stage"], p["done"], p["left"]) == (text.split(":")[0], done, total - done), text
+        assert (p["stage"], p["done"]) == (text.split(":")[0], done), text
+        if p["stage"] == "screen":   # a fixed job list
+            assert p["left"] == total - done, text
+        else:   # seeds the search adds to open verdicts after these results are planned in the run's next batch
+            assert p["left"] >= total - done, text
         checked += 1
     assert checked > 20
     final = design_progress(out)
@@ -159,7 +167,7 @@ def test_design_page_follows_a_growing_log_then_shows_the_answer(design_run, bro
         with open(live / EVALUATIONS, "a") as fh:    # evaluations land while the page is open
             fh.write("".join(lines[5:n_bound + 3]))
         page.wait_for_selector(f"[data-k=done]:text-is('{n_bound + 3}')")
-        assert text_of(page, "stage") == "curves"
+        assert text_of(page, "stage") == "learners"   # the learners are compared on the reference design after the screen
         points = page.evaluate("""(names) => names.map(n =>
             Bokeh.documents[0].get_model_by_name('tradedata:' + n).get_length())""", result["requirements_asked"])
         assert sum(points) == sum(1 for l in lines[:n_bound + 3] if json.loads(l)["status"] == "ok")

@@ -24,8 +24,10 @@ def _write(tmp_path, data) -> str:
     return str(sensor)
 
 
-def test_presets_ship_no_uncertainty_today_and_unknown_names_are_refused():
-    assert all(uncertainty(name) is None for name in PRESET_NAMES)
+def test_only_the_calibrated_denali_preset_ships_uncertainty_and_unknown_names_are_refused():
+    assert [name for name in PRESET_NAMES if uncertainty(name) is not None] == ["denali-tmf8828-3x3"]
+    data, where = uncertainty_for("denali-tmf8828-3x3")  # validated on the way
+    assert where == "preset denali-tmf8828-3x3" and set(data["parameters"]) == {"photon_scale", "dark_rate_hz"}
     with pytest.raises(UserError, match="unknown sensor preset 'tmf9999'"):
         uncertainty("tmf9999")
     data, where = uncertainty_for("tmf8828-3x3-short")

@@ -11,8 +11,14 @@ capture of the fit.
 The matching simulated scene of a capture is
 :func:`~nlosplan.simulators.presets.denali.denali_scene` of its object,
 size and position; ``NOOBJECT`` is the rig without objects and
-``NOOBJECTMOUNT`` the bare object mount (:func:`matching_scene`). Its
-arrivals per zone (:func:`scene_arrivals`) are
+``NOOBJECTMOUNT`` the bare object mount (:func:`matching_scene`). That
+reading is kept on purpose: DENALI's name for the post ("object mount")
+suggests the other one (``NOOBJECTMOUNT`` = no mount), but the only data we
+have, Table 2, prefer a ``NOOBJECT`` background without the mount (the
+``calibrate --stats`` variants: objective 35.6 with the mount in the signal
+vs 37.8 with it in the background; weak evidence). One real
+``NOOBJECT - NOOBJECTMOUNT`` difference would decide it (docs/calibration.md).
+Its arrivals per zone (:func:`scene_arrivals`) are
 
 - the first-bounce returns of every zone sub-ray off the relay wall and the
   tables (:func:`~nlosplan.simulators.fast.geometry.direct_returns`):

@@ -154,6 +154,13 @@ def _cmd_calibrate(args) -> int:
     from nlosplan.cli import calibrate_plane
 
     t0 = time.perf_counter()
+    if args.stats:
+        from nlosplan.cli.calibrate_stats import run_stats
+
+        return run_stats(args, t0)
+    if args.fit is not None or args.variants or (args.positions is not None and not args.score):
+        raise UserError("--fit, --variants and --positions apply to --stats (and --positions to --score of a "
+                        "statistics file)")
     if args.score:
         return calibrate_plane.run_score(args, t0)
     from nlosplan.files import check_output_file, check_plot_path
@@ -279,7 +286,24 @@ def add(sub) -> None:
     p.add_argument("captures", nargs="?", help="JSON captures of a plane at known distances (tmf882x_distance "
                                                "layout), a DENALI-layout folder, or a capture store (.sqlite)")
     p.add_argument("--score", metavar="DATA",
-                   help="score --sensor on DATA without fitting anything: the per-zone table (plane captures so far)")
+                   help="score --sensor on DATA without fitting anything: the per-zone table (plane captures) or the "
+                        "per-row table (a statistics file, e.g. the shipped DENALI Table 2)")
+    p.add_argument("--stats", metavar="FILE",
+                   help="fit to a statistics file (e.g. denali-table2, the shipped DENALI Table 2): sensor photon "
+                        "scale and floor, object albedo and the file's protocol nuisances, from noisy simulated "
+                        "captures with DENALI's processing (common random numbers, nlopt); writes --out, its "
+                        "<stem>.scene.toml and <stem>.uncertainty.json (--bootstrap N: refits within the SEMs)")
+    p.add_argument("--fit", metavar="NAME,...",
+                   help="--stats: parameters to fit (default: photon_scale, dark_rate_hz, albedo and the nuisances)")
+    p.add_argument("--variants", action="store_true",
+                   help="--stats: also refit under the model variants Table 2 cannot decide (object diffuse base "
+                        "0-0.3, mount in or out of the background); their spread joins the uncertainty")
+    p.add_argument("--positions", type=int_type(1, 100), metavar="N",
+                   help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10; "
+                        "fewer are a coarser sample of the gantry grid)")
+    p.add_argument("--scene", metavar="FILE",
+                   help="statistics files: the scene table ([scene], [nuisances] TOML) to score or start from "
+                        "(default: the sensor file's <stem>.scene.toml, or a denali-tmf8828-* preset's own fit)")
     p.add_argument("--model", choices=["zones", "global"],
                    help="JSON plane captures: 'zones' fits every zone with the per-zone terms, amplitude law, pile-up "
                         "and pulse tail; 'global' the single-zone model with one photon scale (zone 4 by default) "

@@ -167,8 +167,17 @@ def run_score(args, t0: float) -> int:
         raise UserError("--folds does not apply to --score (nothing is fitted)")
     sensor = resolve_sensor(args.sensor)
     res = score_input(args.score, sensor, plane_arrivals=plane_arrivals,
-                      min_distance_m=0.06 if args.min_distance is None else args.min_distance)
+                      min_distance_m=0.06 if args.min_distance is None else args.min_distance,
+                      sensor_spec=args.sensor, scene_file=getattr(args, "scene", None),
+                      n_positions=getattr(args, "positions", None) or 10)
     res["seconds"] = time.perf_counter() - t0
+    if res["kind"] == "statistics":
+        from nlosplan.reports.realism_table import format_table2
+
+        text = format_table2(res, title=f"{sensor.name} on {args.score} (statistics; scene table: "
+                                        f"{res['scene_source']}; nothing fitted):")
+        emit(args, res, text)
+        return 0
     text = format_plane_table(res["zones"], res["targets"],
                               title=f"{sensor.name} on {args.score} ({res['kind']}; nothing fitted):")
     emit(args, {k: v for k, v in res.items() if k != "rows"}, text)

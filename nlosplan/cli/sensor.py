@@ -4,6 +4,20 @@ from __future__ import annotations
 
 from nlosplan.cli.common import command_group, emit, sub_parser
 
+
+def _provenance(name: str) -> str:
+    """A few words on where a preset's values come from (``sensor list``)."""
+    if name.startswith("denali-"):
+        return "DENALI facts + Table-2 fit"
+    if name == "tmf8828-3x3-plane-unit":
+        return "plane-unit fit"
+    if name.startswith("vl53"):
+        return "ST docs + assumed"
+    if name.endswith("-long"):
+        return "driver constant + MEAS"
+    return "datasheet + MEAS"
+
+
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.sensor_models import PRESET_NAMES, preset
@@ -14,15 +28,16 @@ def _cmd_sensor_list(args) -> int:
         rows.append(dict(name=name, zones=f"{s.zones_rows}x{s.zones_cols}", bins=s.n_bins,
                          bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
                          pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
-                         iterations=s.iterations))
+                         iterations=s.iterations, provenance=_provenance(name)))
     emit(args, {"presets": rows}, format_table(rows))
     return 0
 
 
 def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import resolve_sensor, sensor_base
+    from nlosplan.sensor_models import PRESET_NAMES, resolve_sensor, sensor_base, uncertainty
 
     s = resolve_sensor(args.name)
+    unc = uncertainty(args.name) if args.name in PRESET_NAMES else None
     if args.toml:  # with its base preset, so that a saved copy takes later model fields from it
         print(s.to_toml(base=sensor_base(args.name)))
     elif args.json:
@@ -32,6 +47,10 @@ def _cmd_sensor_show(args) -> int:
             if k == "pulse_shape" and v is not None:
                 v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
             print(f"{k:>22} = {v}")
+        if unc is not None:
+            print(f"uncertainty ({len(unc['samples'])} bootstrap refits; 95 % intervals):")
+            for k, p in unc["parameters"].items():
+                print(f"{k:>22} = {p['value']:.5g} +- {p['std']:.3g} ({p['lo']:.4g} to {p['hi']:.4g})")
     return 0
 
 

@@ -22,6 +22,7 @@ import pandas as pd
 
 from nlosplan.files import write_text
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
+from nlosplan.reports.realism_section import realism_section
 from nlosplan.reports.tables import format_table, markdown_table
 
 __all__ = ["write_design_report", "requirements_table", "answer_table", "minimum_hardware_text", "learners_table",
@@ -262,6 +263,7 @@ def write_design_report(result: dict, out) -> dict:
         ("Evaluators: error against run time", "Every evaluation records its run time and interval.",
          _evaluator_rows(result)),
     ]
+    sections.insert(1, realism_section(result["reference_sensor"]))
     if result.get("disagreements"):
         n = sum(d["disagree"] for d in result["disagreements"])
         sections.append(("Simulated against real captures",

@@ -54,3 +54,38 @@ def format_plane_table(zones: list[dict], targets: dict, title: str = "") -> str
     lines.append("targets: " + ", ".join(f"{k} {'met' if ok else 'NOT met'}" for k, ok in verdict.items())
                  + ("" if all(verdict.values()) else "   (* marks the zones that miss)"))
     return "\n".join(lines)
+
+
+def format_table2(res: dict, title: str = "") -> str:
+    """One line per statistics row (model / real per statistic, * where a target is missed), the ratios, the levels.
+
+    Parameters
+    ----------
+    res : dict
+        As :func:`nlosplan.calibration.stats_score.score_stats` returns it.
+    """
+    from nlosplan.reports.tables import format_table
+
+    def cell(r, s, fmt):
+        mark = "" if r["meets"][s] else " *"
+        return f"{fmt.format(r[s])} / {fmt.format(r['real'][s])}{mark}"
+
+    rows = [{"row": f"{r['zones']} {r['light']} {r['size']}", "total (model / real)": cell(r, "total", "{:.0f}"),
+             "centroid": cell(r, "centroid", "{:.2f}"), "spread": cell(r, "spread", "{:.2f}"),
+             "skew": cell(r, "skew", "{:+.2f}"),
+             "MC +-": f"{r['mc_std']['total']:.0f} / {r['mc_std']['centroid']:.2f}"} for r in res["rows"]]
+    t = res["targets"]
+    lines = [title] if title else []
+    lines.append(format_table(rows))
+    if res["ratios"]:
+        lines.append("ratios of totals (model / real): " + ", ".join(
+            f"{k} {v['model']:.2f} / {v['real']:.2f}{'' if v['meets'] else ' *'}" for k, v in res["ratios"].items()))
+    if res.get("levels"):
+        lines.append("levels (model / real): " + ", ".join(f"{k} {v['model']:.4g} / {v['real']:.4g}"
+                                                          for k, v in res["levels"].items()))
+    m = res["meets"]
+    lines.append(f"targets (total +-{100 * t['total_rel']:g} %, centroid +-{t['centroid_bins']:g} bin, spread "
+                 f"+-{100 * t['spread_rel']:g} %, skew sign, ratios +-{100 * t['ratio_rel']:g} %): "
+                 f"{m['statistics']} of {m['statistics_of']} row statistics and {m['ratios']} of {m['ratios_of']} "
+                 f"ratios met (* marks a miss); {res['n_scenes']} scenes per row, {len(res['seeds'])} noise seeds")
+    return "\n".join(lines)

@@ -24,7 +24,8 @@ from nlosplan.sensor_models.pipeline import (
     sample_counts,
     sample_histogram,
 )
-from nlosplan.sensor_models.presets import PRESET_NAMES, load_sensor_file, preset, resolve_sensor, sensor_base
+from nlosplan.sensor_models.presets import (PRESET_NAMES, load_sensor_file, preset, resolve_sensor, sensor_base,
+                                            uncertainty)
 from nlosplan.sensor_models.transient import (TimeGrid, bin_nodes_without_irf, deposit, deposit_at, irf_extent_ps,
                                               irf_matrix)
 from nlosplan.sensor_models.zones import flash_intensity, solid_angle_rect, zone_edges_tan, zone_rays, zone_solid_angles
@@ -34,6 +35,7 @@ __all__ = [
     "bin_arrivals", "bin_boxes", "bin_impulses", "bin_nodes_without_irf", "coates_correction", "counts_from_rates",
     "degrade_counts", "degrade_expected", "degrade_linear", "deposit", "deposit_at", "expected_counts",
     "expected_histogram", "flash_intensity", "impulse_fwhm_ps", "impulse_sigma_ps", "irf_extent_ps", "irf_matrix",
-    "load_sensor_file", "pileup_expected", "preset", "pulse_boxes", "reach", "resolve_sensor", "sample_counts", "sample_histogram",
-    "sample_poisson", "saturate", "sensor_base", "solid_angle_rect", "zone_edges_tan", "zone_rays", "zone_solid_angles",
+    "load_sensor_file", "pileup_expected", "preset", "pulse_boxes", "reach", "resolve_sensor", "sample_counts",
+    "sample_histogram", "sample_poisson", "saturate", "sensor_base", "solid_angle_rect", "uncertainty", "zone_edges_tan",
+    "zone_rays", "zone_solid_angles",
 ]

@@ -185,10 +185,25 @@ def _plane_unit_3x3() -> SensorConfig:
                + notes + " Ambient and dark rates: MEAS counts per bin at this unit's iterations."))
 
 
+def _denali(zones: str) -> SensorConfig:
+    """DENALI's unit (:mod:`.presets_denali`): facts of its capture settings plus the Table-2 fit."""
+    from nlosplan.sensor_models import presets_denali as d
+
+    rows = int(zones[0])
+    it = d.DENALI_ITERATIONS[zones]
+    name = f"denali-tmf8828-{zones}"
+    base = _tmf8828_short(rows, rows, d.DENALI_FOV_DEG, it, name)
+    return base.replace(pulse_tail_fraction=PLANE_UNIT["pulse_tail_fraction"],
+                        pulse_tail_decay_ps=PLANE_UNIT["pulse_tail_decay_ps"], **d.DENALI_FIT,
+                        notes=d.DENALI_PROVENANCE.format(iterations=f"{it:,}", scores=d.DENALI_SCORES))
+
+
 def _builders() -> dict:
     return {
         "tmf8828-3x3-short": lambda: _tmf8828_short(3, 3, (33.0, 32.0), 550_000, "tmf8828-3x3-short"),
         "tmf8828-3x3-plane-unit": _plane_unit_3x3,
+        "denali-tmf8828-3x3": lambda: _denali("3x3"),
+        "denali-tmf8828-8x8": lambda: _denali("8x8"),
         "tmf8828-4x4-short": lambda: _tmf8828_short(4, 4, (41.0, 52.0), 550_000, "tmf8828-4x4-short"),
         "tmf8828-8x8-short": lambda: _tmf8828_short(8, 8, (41.0, 52.0), 125_000, "tmf8828-8x8-short"),
         "tmf8828-3x3-long": _tmf8828_3x3_long,
@@ -287,20 +302,25 @@ def sensor_base(spec) -> str | None:
 
 def uncertainty(name: str) -> dict | None:
     """The parameter uncertainty a preset ships (the ``X.uncertainty.json`` format of
-    :mod:`nlosplan.sensor_models.uncertainty`), or None.
+    :mod:`nlosplan.sensor_models.uncertainty`, package data ``data/<name>.uncertainty.json``), or None.
 
-    No preset ships one today: their measured values carry line-fit errors
-    only (:data:`MEASURED`), not a calibration's joint uncertainty. The design
-    planner's worlds then draw only from their declared ranges.
+    ``denali-tmf8828-3x3`` ships one (``nlosplan calibrate --stats denali-table2 --bootstrap 40 --variants``:
+    photon scale and floor). The other presets' measured values carry line-fit errors only
+    (:data:`MEASURED`), not a calibration's joint uncertainty; the design planner's worlds then draw only
+    from their declared ranges.
 
     Raises
     ------
     UserError
         For an unknown preset name.
     """
-    if name not in _builders():
-        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(_builders())}")
-    return None
+    import json
+    from importlib import resources
+
+    if name not in PRESET_NAMES:
+        raise UserError(f"unknown sensor preset {name!r}; allowed: {', '.join(PRESET_NAMES)}")
+    f = resources.files("nlosplan.sensor_models") / "data" / f"{name}.uncertainty.json"
+    return json.loads(f.read_text()) if f.is_file() else None
 
 
 def resolve_sensor(spec) -> SensorConfig:

@@ -29,9 +29,10 @@ from nlosplan.planner.design.summary import summarize
 __all__ = ["STAGES", "design_progress", "search_from_files"]
 
 #: The stages in run order: ``references`` (simulating, before any evaluation), the search's own
-#: (``screen`` ... ``verify``; ``optimize`` runs COBYLA and evaluates nothing), ``finishing``
-#: (nothing left to evaluate: the stability catalog and the report), ``done`` (``result.json`` written).
-STAGES = ("references", "screen", "curves", "refine", "optimize", "verify", "finishing", "done")
+#: (:attr:`DesignSearch.STAGES`, ``screen`` ... ``worlds``; ``optimize`` runs COBYLA and evaluates nothing),
+#: ``finishing`` (nothing left to evaluate: the stability catalog and the report), ``done`` (``result.json``
+#: written).
+STAGES = ("references",) + tuple(s for s in DesignSearch.STAGES if s != "done") + ("finishing", "done")
 
 
 def _tuples(d: dict) -> dict:

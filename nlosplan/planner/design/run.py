@@ -474,6 +474,6 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
         path = out / "reference" / f"world{w.index}_{layout}_{scenes.key(sensor)}.npz"
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
-    say(f"worlds: simulating {len(jobs)} reference(s) ({plan.scenes.n_scenes} scenes each)")
-    _simulate(executor, jobs, say, "worlds", cache)
+    say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
+    _simulate(executor, jobs, say, "world references", cache)
     return paths

@@ -1,0 +1,19 @@
+"""The shipped realism scores: how the calibrated presets predict real data (package data ``data/realism.json``).
+
+Made by ``nlosplan bench real`` (its ``table2`` part on ``denali-tmf8828-3x3``;
+the ``plane`` part's held-out summary on ``tmf8828-3x3-plane-unit``) and
+shipped so that reports can show them without rerunning a calibration. The
+layout is ``bench real``'s JSON: ``{"plane": {"sensor", "data", "summary",
+"targets"}, "table2": {"sensor", "rows", "ratios", "levels", "meets",
+"targets", ...}, "made_by"}``.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+
+
+def shipped_realism() -> dict:
+    """The shipped scores (see the module notes)."""
+    return json.loads((resources.files("nlosplan.calibration") / "data" / "realism.json").read_text())
