@@ -5,6 +5,15 @@ import pytest
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _reference_cache_in_tmp(tmp_path_factory):
+    """The design reference cache of the test session in a temporary folder, not the user's."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("NLOSPLAN_CACHE", str(tmp_path_factory.mktemp("nlosplan-cache")))
+    yield
+    mp.undo()
+
+
 @pytest.fixture
 def shared_data() -> Path:
     path = SHARED / "data"

@@ -30,7 +30,7 @@ def run(tmp_path_factory):
     """One small run through the CLI glue: 6 positions, reference at position 0 with a small reference level."""
     plot = tmp_path_factory.mktemp("bench") / "bench_simulate.png"
     args = _parser().parse_args(["--levels", ",".join(LEVELS), "--positions", "6", "--reference-positions", "0",
-                                 "--repeats", "1", "--plot", str(plot)])
+                                 "--repeats", "1", "--plot", str(plot), "--baseline"])
     steps = []
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(FIDELITY_LEVELS, "reference", SMALL_REFERENCE)
@@ -57,7 +57,7 @@ def test_json_has_the_required_keys_and_types(run):
     assert result["reference"]["half_knobs"]["object_samples"] == SMALL_REFERENCE.object_samples // 2
     assert result["config"]["positions"] == list(range(6)) and result["config"]["reference_positions"] == [0]
     assert result["machine"]["cpu_count"] >= 1 and result["machine"]["jax_devices"]
-    assert len(steps) == bench.bench_steps(LEVELS, (0,), MODELS) and all(isinstance(s, str) and s for s in steps)
+    assert len(steps) == bench.bench_steps(LEVELS, (0,), MODELS, baseline=True) and all(isinstance(s, str) and s for s in steps)
     json.dumps(result, allow_nan=False)  # strict JSON: no NaN or infinity
 
 
@@ -89,6 +89,15 @@ def test_scene_models_are_timed_and_scored_in_the_same_run(run):
     assert bench.MODEL_OPTIONS["mixed+mount"] == {**bench.MODEL_OPTIONS["mixed"], "mount": True,
                                                   "mount_in_background": False}
     assert "model mixed (albedo=0.36, diffuse_albedo=0.2; draft, batched)" in run[1]
+    # --baseline: the deposit of before issue 20 timed beside the current one, same results within float32 rounding
+    for r in rows.values():
+        b = r["baseline"]
+        assert b["deposit"] == "scatter" and b["scenes_per_second"] > 0 and b["single_call_ms"] > 0
+        assert r["single_call_ms"] > 0 and r["speed_ratio_vs_baseline"] == pytest.approx(
+            b["scenes_per_second"] and r["scenes_per_second"] / b["scenes_per_second"])
+        assert b["max_rel_diff_vs_new"] < 1e-5
+        assert b["rel_l1_error"] == pytest.approx(r["rel_l1_error"], rel=1e-3, abs=1e-6)
+    assert run[1].count("vs the deposit before issue 20 (scatter, same run)") == len(MODELS)
 
 
 def test_unknown_scene_model_is_rejected():

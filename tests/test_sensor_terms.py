@@ -181,3 +181,33 @@ def test_time_walk_moves_each_zone_by_its_own_light_in_the_pipeline_and_the_fast
                                fidelity="draft", dtype="float64")
     np.testing.assert_allclose(walked.expected(), as_offsets.expected(), rtol=1e-6, atol=1e-9 * parts["counts"].max())
     assert "computed  time walk" in walked.explain()
+
+
+def test_time_walk_is_held_at_its_bounds_and_the_grid_holds_its_largest_shift():
+    from nlosplan.sensor_models.transient import TimeGrid
+    from nlosplan.sensor_models.zone_terms import WALK_DECADES, walk_reach_ps, walk_shift_ps
+
+    shift = np.asarray(walk_shift_ps(np.array([1e-30, 10 ** -WALK_DECADES, 0.01, 1.0, 100.0, 1e12]), 50.0))
+    np.testing.assert_allclose(shift, [300.0, 300.0, 100.0, 0.0, -100.0, -300.0], atol=1e-9)
+    assert walk_reach_ps(-50.0) == pytest.approx(50.0 * WALK_DECADES)
+    base = _sensor()
+    plain = TimeGrid.for_sensor(base, 0.0, 3000.0, oversample=2)
+    walked = TimeGrid.for_sensor(base.replace(time_walk_ps=50.0), 0.0, 3000.0, oversample=2)
+    # arrivals end at 3000 ps: the walk can move them up to 300 ps later, 3 more bins of 100 ps (1 ps rounding)
+    assert walked.first_bin + walked.n_grid_bins >= plain.first_bin + plain.n_grid_bins + 3
+
+
+def test_time_walk_of_a_scene_is_unchanged_by_an_object_outside_the_window():
+    # the far object is pruned but stretches the plan's node grid to the window's end; the walk moved the wall's
+    # light (under 1 photon per iteration: later) off the shorter grid of the scene without it (41 % at the peak)
+    from nlosplan.simulators import FastSimulator, corner_scene
+
+    scene = corner_scene(object_xy=(0.45, 10.0), wall_size=(20.0, 10.0))
+    sensor = preset("tmf8828-3x3-short")
+    assert sensor.time_walk_ps != 0
+    far = FastSimulator(scene, sensor, fidelity="draft", dtype="float64")
+    bg = FastSimulator(scene.without_objects(), sensor, fidelity="draft", dtype="float64")
+    assert far.plan.static.grid.n_grid_bins > bg.plan.static.grid.n_grid_bins and not far.plan.static.objects
+    h, h0 = np.asarray(far.expected()), np.asarray(bg.expected())
+    assert h0.max() > 1e3
+    np.testing.assert_allclose(h, h0, rtol=1e-9, atol=1e-9 * h0.max())

@@ -144,7 +144,8 @@ def _cmd_design(args) -> int:
                 bar.set_postfix_str(detail)
 
         result = run_design(cfg, args.out, resume=args.resume, workers=args.workers, cluster=args.cluster,
-                            progress=progress, overwrite=args.overwrite, repair=args.repair)
+                            progress=progress, overwrite=args.overwrite, repair=args.repair,
+                            cache=not args.no_cache)
     with writing(kept=f"every evaluation is kept in {args.out} (design_evaluations.jsonl)",
                  cont="free some space and rerun with --resume: nothing is evaluated again"):
         paths = write_design_report(result, args.out)
@@ -202,6 +203,9 @@ def add(sub) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="start over where OUT holds a previous run (its files move to .bak); without it that is "
                         "an error")
+    p.add_argument("--no-cache", action="store_true",
+                   help="simulate the references even when an earlier run with the same sensor, scenes and "
+                        "simulator code left them in the cache ($NLOSPLAN_CACHE or ~/.cache/nlosplan)")
     runner = p.add_argument_group("where evaluations run")
     runner.add_argument("--workers", type=int_type(1, 256), default=None,
                         help="local worker processes (default: the CPU count)")

@@ -88,6 +88,13 @@ def _model_lines(rows: list) -> list[str]:
                    f"(x{r['speed_ratio_vs_retroreflective']:.2f} of retroreflective in the same run), "
                    f"{r['paths_per_scene']:,} paths, rel L1 {_pct(r['rel_l1_error'])}, centroid "
                    f"{r['centroid_shift_bins']:.3g} bins")
+        b = r.get("baseline")
+        if b:
+            out.append(f"  vs the deposit before issue 20 ({b['deposit']}, same run): {b['scenes_per_second']:.4g} "
+                       f"scenes/s (new x{r['speed_ratio_vs_baseline']:.2f}), single call {r['single_call_ms']:.3g} ms "
+                       f"vs {b['single_call_ms']:.3g} ms (x{r['single_call_ratio_vs_baseline']:.2f}), rel L1 "
+                       f"{_pct(r['rel_l1_error'])} vs {_pct(b['rel_l1_error'])}, new vs old max rel diff "
+                       f"{b['max_rel_diff_vs_new']:.2g}")
     return out
 
 

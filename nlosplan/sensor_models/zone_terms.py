@@ -21,7 +21,11 @@ Crosstalk (light that never leaves the sensor, ``t = 0``) takes the gain and
 the offset but not the overlap. With a time walk ``w`` (ps per decade) the
 zone's light is recorded ``w log10(Lambda_z)`` earlier, ``Lambda_z`` its signal
 photons per iteration arriving inside the window (after gain, overlap and the
-zone's clock; crosstalk included).
+zone's clock; crosstalk included), held at its values at ``10^-WALK_DECADES`` and
+``10^WALK_DECADES`` photons per iteration. The bound makes the largest shift a
+property of the sensor (:func:`walk_reach_ps`), so node grids can hold every
+arrival the walk can move into the window and every place it can move content
+to: a result does not depend on how far a grid reaches beyond that.
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ import numpy as np
 from nlosplan._jax import jnp
 from nlosplan.constants import C_M_PER_PS
 from nlosplan.sensor_models.config import SensorConfig
+
+#: The time walk follows ``log10`` of a zone's light over this many decades either side of 1 photon per iteration.
+WALK_DECADES = 6.0
 
 
 def zone_values(sensor: SensorConfig, zones=None) -> dict:
@@ -174,8 +181,18 @@ def apply_zone_terms_arrivals(times_ps, weights, *, gains=None, offsets_ps=None,
 
 
 def walk_shift_ps(flux, walk_ps):
-    """Time shift (ps, negative = earlier) of a zone with ``flux`` signal photons per iteration."""
-    return -jnp.asarray(walk_ps) * jnp.log10(jnp.maximum(jnp.asarray(flux), 1e-30))
+    """Time shift (ps, negative = earlier) of a zone with ``flux`` signal photons per iteration.
+
+    ``-w log10(flux)`` with ``log10(flux)`` held within ``[-WALK_DECADES, WALK_DECADES]``
+    (so ``|shift| <= walk_reach_ps(w)``); differentiable in ``flux`` inside that range.
+    """
+    decades = jnp.clip(jnp.log10(jnp.maximum(jnp.asarray(flux), 1e-30)), -WALK_DECADES, WALK_DECADES)
+    return -jnp.asarray(walk_ps) * decades
+
+
+def walk_reach_ps(walk_ps: float) -> float:
+    """Largest time shift (ps, either way) that a time walk of ``walk_ps`` per decade can give."""
+    return abs(float(walk_ps)) * WALK_DECADES
 
 
 def window_light(nodes, node_times_ps, start_ps, window_ps):

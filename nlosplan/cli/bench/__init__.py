@@ -104,6 +104,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--repeats", type=int_type(1), default=3, help="timed calls per figure, best kept (default: 3)")
     parser.add_argument("--plot", nargs="?", const=DEFAULT_PLOT, default=None, metavar="PATH",
                         help=f"also plot error against run time: {DEFAULT_PLOT}, or PATH (.png, .pdf, .svg, ...)")
+    parser.add_argument("--baseline", action="store_true",
+                        help="also time each scene model with the deposit of before issue 20 (two scalar "
+                             "scatter-adds) beside the current one in the same run; prints the ratios")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser
 
@@ -139,7 +142,8 @@ def run_from_args(args: argparse.Namespace, progress: Progress | None = None, **
     result = bench_simulate(levels=tuple(args.levels), positions=positions,
                             reference_positions=reference_positions_for(args.positions, args.reference_positions),
                             objects=tuple(args.objects), sizes=tuple(args.sizes), sensor=args.sensor, dtype=args.dtype,
-                            repeats=args.repeats, progress=progress, **options)
+                            repeats=args.repeats, progress=progress, baseline=getattr(args, "baseline", False),
+                            **options)
     from nlosplan.reports.bench_text import format_bench_simulate
 
     text = format_bench_simulate(result)
@@ -170,7 +174,8 @@ def check_arguments(args: argparse.Namespace) -> None:
 
 def _cmd_bench_simulate(args) -> int:
     check_arguments(args)
-    steps = bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions))
+    steps = bench_steps(args.levels, reference_positions_for(args.positions, args.reference_positions),
+                        baseline=args.baseline)
     with progress_bar(args, steps, "bench simulate", "step") as bar:
         def progress(text: str) -> None:
             bar.update(1, text[:60])

@@ -28,7 +28,7 @@ from pathlib import Path
 from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
-from nlosplan.planner.design import robust
+from nlosplan.planner.design import reference_cache, robust
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
 from nlosplan.planner.design.evaluators import evaluate
@@ -260,18 +260,26 @@ def _layout_design(space: DesignSpace, layout) -> Design:
     return Design(layout, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
 
 
-def _simulate(executor, jobs: list[ReferenceJob], say, what: str) -> dict:
-    """Run reference jobs on the executor (in parallel); ``label -> seconds``. A failure stops the run."""
+def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True) -> dict:
+    """Run reference jobs on the executor (in parallel); ``label -> seconds``. A failure stops the run.
+
+    With ``cache``, a reference an earlier run left in :mod:`.reference_cache` is copied instead of simulated,
+    and a simulated one is put there.
+    """
+    if cache:
+        jobs = [j for j in jobs if Path(j.path).exists() or not reference_cache.restore(j.path, j.sensor, j.scenes, say)]
     out = {}
     for i, (job, res) in enumerate(executor.map(build_reference, jobs)):
         if res.get("status") != "ok":
             raise RuntimeError(f"simulating the {job.label} reference failed: {res.get('reason')}")
         out[job.label] = res["seconds"]
         say(f"{what}: {job.label}", i + 1, len(jobs))
+        if cache:
+            reference_cache.store(job.path, job.sensor, job.scenes)
     return out
 
 
-def _references(cfg: DesignConfig, out: Path, say, executor) -> tuple[dict, dict, dict]:
+def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True) -> tuple[dict, dict, dict]:
     """Simulated reference per zone layout (reused when saved with the same key); real ones if asked."""
     from nlosplan.planner.design.data import load_reference
 
@@ -285,7 +293,7 @@ def _references(cfg: DesignConfig, out: Path, say, executor) -> tuple[dict, dict
             jobs.append(ReferenceJob(str(path), sensor, scenes, f"{z[0]}x{z[1]}"))
     if jobs:
         say(f"references: simulating {len(jobs)} ({scenes.n_scenes} scenes each)")
-        _simulate(executor, jobs, say, "references")
+        _simulate(executor, jobs, say, "references", cache)
     for layout, path in sims.items():
         ref = load_reference(path)
         info[layout] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
@@ -326,7 +334,8 @@ def check_inputs(cfg: DesignConfig) -> None:
 
 
 def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
-               cluster: str | None = None, progress=None, overwrite: bool = False, repair: bool = False) -> dict:
+               cluster: str | None = None, progress=None, overwrite: bool = False, repair: bool = False,
+               cache: bool = True) -> dict:
     """Run the design search and summarize it.
 
     Parameters
@@ -348,6 +357,9 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
         Start over where a previous run's files are (they move to ``.bak``); without it that is an error.
     repair : bool
         With ``resume``: drop damaged lines of the evaluation log (else they stop the run with their numbers).
+    cache : bool
+        Take simulated references from the content cache of earlier runs and put new ones there
+        (:mod:`~nlosplan.planner.design.reference_cache`); False simulates them (``--no-cache``).
 
     Returns
     -------
@@ -377,7 +389,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     try:
         with writing(kept=f"every evaluation finished so far is kept in {ckpt.log}",
                      cont="free some space and rerun with --resume"):
-            result, stability = _search(cfg, out, ckpt, executor, say, worlds)
+            result, stability = _search(cfg, out, ckpt, executor, say, worlds, cache)
         executor_name = executor.name
     finally:
         executor.close()
@@ -388,9 +400,9 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
 
 
 def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
-            worlds: robust.WorldPlan | None) -> tuple[dict, dict | None]:
+            worlds: robust.WorldPlan | None, cache: bool = True) -> tuple[dict, dict | None]:
     """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
-    sims, real, ref_info = _references(cfg, out, say, executor)
+    sims, real, ref_info = _references(cfg, out, say, executor, cache)
     if worlds is not None and cfg.worlds.scene_step == 1:  # the worlds' scenes are the run's: world 0 is its own
         worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None, worlds)
@@ -415,7 +427,7 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         if not jobs and search.stage == "worlds" and worlds is not None:
             need = robust.needed_references(search)
             if need:
-                search.add_world_references(_world_references(cfg, out, worlds, need, executor, say))
+                search.add_world_references(_world_references(cfg, out, worlds, need, executor, say, cache))
                 continue
         if not jobs:
             break
@@ -449,7 +461,8 @@ def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
     return robust.WorldPlan(wcfg, worlds, scenes, cfg.scenes.n_scenes / scenes.n_scenes, sources=sources)
 
 
-def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need, executor, say) -> dict:
+def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need, executor, say,
+                      cache: bool = True) -> dict:
     """Simulate the references ``need`` lists (``(world, layout)``) on the executor; ``(index, layout) -> path``."""
     from nlosplan.planner.design.space import parse_zones
 
@@ -462,5 +475,5 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
-    _simulate(executor, jobs, say, "world references")
+    _simulate(executor, jobs, say, "world references", cache)
     return paths

@@ -113,10 +113,11 @@ def _check_positions(positions: Iterable[int], what: str) -> tuple[int, ...]:
 
 
 def bench_steps(levels: Sequence[str] = DEFAULT_LEVELS, reference_positions: Sequence[int] = DEFAULT_REFERENCE_POSITIONS,
-                models: Sequence[str] = tuple(MODEL_OPTIONS)) -> int:
+                models: Sequence[str] = tuple(MODEL_OPTIONS), baseline: bool = False) -> int:
     """Number of ``progress`` calls :func:`bench_simulate` makes (for a progress bar)."""
     parts = sum(_lambertian_parts(MODEL_OPTIONS[m]) for m in models)
-    return 2 * len(levels) + 2 * len(reference_positions) + 5 + len(models) + parts * len(reference_positions)
+    return (2 * len(levels) + 2 * len(reference_positions) + 5 + (2 if baseline else 1) * len(models)
+            + parts * len(reference_positions))
 
 
 def _lambertian_parts(options: dict) -> int:
@@ -165,6 +166,7 @@ def bench_simulate(
     matmul_n: int = MATMUL_N,
     min_seconds: float = 1.0,
     models: Sequence[str] = tuple(MODEL_OPTIONS),
+    baseline: bool = False,
 ) -> dict:
     """Error against run time of the fast simulator on the DENALI preset.
 
@@ -196,6 +198,9 @@ def bench_simulate(
     min_seconds : float
         Each figure keeps calling for at least this long (the fastest call is
         kept), so that a busy machine has quiet moments to show.
+    baseline : bool
+        Also time each scene model with the deposit of before issue 20 (``deposit="scatter"``) beside
+        the current one, in the same process: ``models[i]["baseline"]`` and ``speed_ratio_vs_baseline``.
     models : sequence of str
         Scene models (:data:`MODEL_OPTIONS`) timed back to back at
         ``study_level`` and scored against their own reference.
@@ -270,7 +275,7 @@ def bench_simulate(
         row.update(rel_l1_error=err["rel_l1_error"], centroid_shift_bins=err["centroid_shift_bins"],
                    errors_per_position=err["per_position"])
     model_rows = _models(models, objects, sizes, positions, index, reference_positions, reference["_ref"], sensor_cfg,
-                         study_level, dtype, repeats, min_seconds, say)
+                         study_level, dtype, repeats, min_seconds, say, baseline)
     reference.pop("_ref")
 
     pruning, study_sim = _pruning(objects, sizes, positions, sensor_cfg, study_level, dtype, repeats, min_seconds, say)
@@ -358,7 +363,7 @@ def _model_reference(scene, sensor, retro_ref: np.ndarray, retro_albedo: float, 
 
 
 def _models(models, objects, sizes, positions, index, reference_positions, retro_ref, sensor, level, dtype, repeats,
-            min_seconds, say) -> list[dict]:
+            min_seconds, say, baseline: bool = False) -> list[dict]:
     """Each scene model timed batched at ``level``, back to back, and scored against its float64 reference.
 
     The retroreflective model reuses the main reference (the same scenes); the others are referenced part
@@ -384,10 +389,34 @@ def _models(models, objects, sizes, positions, index, reference_positions, retro
                      "seconds_per_scene_batched": best / len(scenes), "paths_per_scene": sim.plan.paths,
                      "rel_l1_error": err["rel_l1_error"], "centroid_shift_bins": err["centroid_shift_bins"],
                      "errors_per_position": err["per_position"]})
+        if baseline:
+            rows[-1].update(_against_baseline(scenes, sim, best, got, ref, index, reference_positions, sensor, level,
+                                              dtype, repeats, min_seconds, say, name))
     base = next((r for r in rows if r["model"] == "retroreflective"), None)
     for r in rows:
         r["speed_ratio_vs_retroreflective"] = r["scenes_per_second"] / base["scenes_per_second"] if base else math.nan
     return rows
+
+
+def _against_baseline(scenes, sim, best, got, ref, index, reference_positions, sensor, level, dtype, repeats,
+                      min_seconds, say, name) -> dict:
+    """The deposit of before issue 20 (``deposit="scatter"``) timed after the current one, and both single-call."""
+    say(f"models ({level}): {name}, baseline deposit (scatter)")
+    old = FastSimulator(scenes, sensor, fidelity=level, dtype=dtype, deposit="scatter")
+    _, old_best = _warm_and_time(old, repeats, min_seconds)
+    old_obj = old.expected(parts=True)["object"]
+    old_got = {p: old_obj[index[p]] for p in reference_positions}
+    single = {}
+    for method in ("window", "scatter"):
+        one = FastSimulator(scenes[0], sensor, fidelity=level, dtype=dtype, deposit=method)
+        single[method] = _warm_and_time(one, max(repeats, 5), min_seconds)[1]
+    old_err = errors(old_got, ref)
+    return {"single_call_ms": 1e3 * single["window"],
+            "baseline": {"deposit": "scatter", "scenes_per_second": len(scenes) / old_best,
+                         "single_call_ms": 1e3 * single["scatter"], "rel_l1_error": old_err["rel_l1_error"],
+                         "max_rel_diff_vs_new": max_rel_diff(np.stack([got[p] for p in reference_positions]),
+                                                            np.stack([old_got[p] for p in reference_positions]))},
+            "speed_ratio_vs_baseline": old_best / best, "single_call_ratio_vs_baseline": single["scatter"] / single["window"]}
 
 
 def _pruning(objects, sizes, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:

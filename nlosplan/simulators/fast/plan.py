@@ -27,7 +27,7 @@ from nlosplan.constants import C_M_PER_PS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import pulse_boxes
-from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps
+from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps, move_reach_ps
 from nlosplan.sensor_models.zone_terms import zone_values
 from nlosplan.simulators.fast.fidelity import Fidelity, resolve_fidelity
 from nlosplan.simulators.fast.geometry import direct_returns, trace
@@ -64,6 +64,7 @@ class PlanStatic:
     spads: int = 1
     dead_time_ps: float | None = None
     walk_ps: float = 0.0
+    deposit: str = "window"
 
 
 @dataclass(frozen=True)
@@ -269,6 +270,13 @@ def _object_parts(objs: list, fid: Fidelity) -> tuple[list[tuple[str, str, str, 
     return parts, lines
 
 
+def _moves(sensor: SensorConfig) -> float:
+    """Largest move (ps) of the sensor's zone clocks and time walk near its window (see ``move_reach_ps``)."""
+    lo, hi = irf_extent_ps(sensor)
+    t0 = sensor.start_offset_ps
+    return move_reach_ps(sensor, max(abs(t0 - hi), abs(t0 + sensor.window_ps - lo)))
+
+
 def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool) -> tuple[str, Term]:
     pulse = sensor.pulse_shape is not None
     if not prune or sigma_max > 0:
@@ -331,8 +339,9 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
 
     sigmas = [s.sigma_ps for s in sensors]
     sigma_max = max(sigmas)
-    reach = (min(s.start_offset_ps - irf_extent_ps(s)[1] for s in sensors),
-             max(s.start_offset_ps + s.window_ps - irf_extent_ps(s)[0] for s in sensors))
+    # arrival times that can reach the window through the impulse response and the time walk's largest shift
+    reach = (min(s.start_offset_ps - irf_extent_ps(s)[1] - _moves(s) for s in sensors),
+             max(s.start_offset_ps + s.window_ps - irf_extent_ps(s)[0] + _moves(s) for s in sensors))
     # latest possible arrival: direct paths and the farthest object path via the wall's corners
     t_hi = float(path.max()) / C_M_PER_PS if direct else 0.0
     r_wall = float(np.linalg.norm(base.wall.corners() - base.lidar.position, axis=1).max())

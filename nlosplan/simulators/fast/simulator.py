@@ -7,6 +7,8 @@ array shapes), so a loop over DENALI objects or positions compiles once.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from nlosplan._jax import jax, jnp
@@ -14,6 +16,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
+from nlosplan.sensor_models.transient import DEPOSIT_METHODS, deposit_method
 from nlosplan.simulators.fast.transport import forward, scene_counts, sensor_terms
 from nlosplan.simulators.scene import Scene
 
@@ -33,7 +36,8 @@ def _batched(static, arrays, scene_p, sensor_p, parts):
         terms = sensor_terms(static, arrays, sp)  # once per sensor, shared by the scenes
         return jax.lax.map(lambda sc: scene_counts(static, arrays, sc, terms, parts), scene_p)
 
-    return jax.lax.map(per_sensor, sensor_p)
+    with deposit_method(static.deposit):
+        return jax.lax.map(per_sensor, sensor_p)
 
 
 _BATCHED = jax.jit(_batched, static_argnums=(0, 4))
@@ -106,6 +110,10 @@ class FastSimulator:
         iterations, ambient, dark and crosstalk); ``sensor`` is ignored then.
     chunk : int
         Scenes per compiled batch call (memory bound).
+    deposit : {"window", "scatter"}
+        How arrivals are added onto the node grid (:data:`~nlosplan.sensor_models.transient.DEPOSIT_METHODS`):
+        one windowed scatter-add (default) or the two scalar ones of before issue 20 (``bench simulate
+        --baseline``); equal up to float summation order.
 
     Examples
     --------
@@ -117,7 +125,7 @@ class FastSimulator:
     """
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
-                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25):
+                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window"):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -127,7 +135,11 @@ class FastSimulator:
         self.dtype = jnp.dtype(str(dtype))
         self.single_scene = isinstance(scenes, Scene)
         self.single_sensor = sensors is None
+        if deposit not in DEPOSIT_METHODS:
+            raise UserError(f"deposit={deposit!r} is not supported; allowed: {', '.join(DEPOSIT_METHODS)}")
         self.plan: SimPlan = build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune)
+        if deposit != self.plan.static.deposit:
+            self.plan = dataclasses.replace(self.plan, static=dataclasses.replace(self.plan.static, deposit=deposit))
         self.chunk = max(1, int(chunk))
         self._arrays = to_jax(self.plan.arrays, self.dtype)
         self._params = None

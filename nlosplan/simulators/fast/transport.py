@@ -37,7 +37,7 @@ from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
 from nlosplan.sensor_models.pipeline import counts_from_rates
-from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, irf_matrix
+from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, deposit_method, irf_matrix
 from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
@@ -355,4 +355,5 @@ def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
     ``sensor_terms`` (impulse-response matrix, first bounce, crosstalk)
     then ``scene_counts`` (the objects); a batch computes the first once.
     """
-    return scene_counts(static, arrays, scene_p, sensor_terms(static, arrays, sensor_p), parts)
+    with deposit_method(static.deposit):
+        return scene_counts(static, arrays, scene_p, sensor_terms(static, arrays, sensor_p), parts)

@@ -1,0 +1,93 @@
+"""The design planner's reference cache by content (issue 20): a second run does not simulate again."""
+
+import numpy as np
+import pytest
+
+from nlosplan.planner.design import data as design_data
+from nlosplan.planner.design import reference_cache
+from nlosplan.planner.design.data import SceneSet, load_reference
+from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
+from nlosplan.planner.design.run import EVALUATIONS, DesignConfig, read_evaluations, run_design
+from nlosplan.planner.design.search import SearchConfig
+from nlosplan.planner.design.space import DesignSpace
+from nlosplan.planner.design.worlds import WorldsConfig
+
+
+def tiny() -> DesignConfig:
+    fid = {k: dict(v) for k, v in DEFAULT_FIDELITY.items()}
+    fid["bound"]["draws"] = 30
+    fid["trained"].update(epochs=2, bootstrap=20)
+    return DesignConfig(
+        space=DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1,), axes=("zones",)),
+        search=SearchConfig(grid_points=2, refine_steps=0, seeds=1, candidates=1, optimize_evals=2, fidelity=fid),
+        scenes=SceneSet(objects=("A", "S"), positions=tuple(range(0, 100, 25)), repeats=1,
+                        crlb_objects=("A",), crlb_stride=50, fidelity="draft"),
+        worlds=WorldsConfig(count=1, candidates=1), label="cache")
+
+
+@pytest.fixture
+def counted(monkeypatch, tmp_path):
+    monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path / "cache"))
+    calls = []
+    real = design_data.simulate_reference
+
+    def counting(sensor, scenes, **kw):
+        calls.append(sensor.name)
+        return real(sensor, scenes, **kw)
+
+    monkeypatch.setattr(design_data, "simulate_reference", counting)
+    return calls
+
+
+def _values(out):
+    return sorted((r["design_id"] if "design_id" in r else str(r.get("design")), r.get("kind"), r.get("task"),
+                   r.get("value")) for r in read_evaluations(out / EVALUATIONS))
+
+
+def _means(out):
+    (path,) = sorted((out / "reference").glob("1x1_*.npz"))
+    return load_reference(path).means
+
+
+@pytest.mark.slow  # three design runs (~2.5 min on 2 shared cores); the damaged-entry test covers reuse fast
+def test_second_run_takes_the_references_from_the_cache(counted, tmp_path):
+    run_design(tiny(), tmp_path / "a", workers=1)
+    n = len(counted)
+    assert n >= 1
+    run_design(tiny(), tmp_path / "b", workers=1)
+    assert len(counted) == n, "the second run simulated references again"
+    np.testing.assert_array_equal(_means(tmp_path / "a"), _means(tmp_path / "b"))
+    assert _values(tmp_path / "a") == _values(tmp_path / "b")
+    # --no-cache simulates again
+    run_design(tiny(), tmp_path / "c", workers=1, cache=False)
+    assert len(counted) == 2 * n
+
+
+def test_damaged_entry_is_recomputed_with_a_note(counted, tmp_path):
+    cfg = tiny()
+    run_design(cfg, tmp_path / "a", workers=1)
+    n = len(counted)
+    entry = sorted(reference_cache.cache_dir().glob("*.npz"))[0]
+    raw = bytearray(entry.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    entry.write_bytes(bytes(raw))
+    notes = []
+    run_design(cfg, tmp_path / "b", workers=1, progress=lambda text, *a: notes.append(text))
+    assert len(counted) == n + 1
+    assert any("damaged" in n and "checksum" in n for n in notes), notes
+    np.testing.assert_array_equal(_means(tmp_path / "a"), _means(tmp_path / "b"))
+    # the recomputed entry is valid again: a third run takes it
+    run_design(cfg, tmp_path / "c", workers=1)
+    assert len(counted) == n + 1
+
+
+def test_key_changes_with_sensor_scenes_and_code(monkeypatch):
+    cfg = tiny()
+    sensor = cfg.space.sensor
+    k = reference_cache.cache_key(sensor, cfg.scenes)
+    assert k == reference_cache.cache_key(sensor, cfg.scenes)
+    assert k != reference_cache.cache_key(sensor.replace(jitter_fwhm_ps=sensor.jitter_fwhm_ps + 1.0), cfg.scenes)
+    from dataclasses import replace
+    assert k != reference_cache.cache_key(sensor, replace(cfg.scenes, fidelity="low"))
+    monkeypatch.setattr(reference_cache, "code_version", lambda: "edited")
+    assert k != reference_cache.cache_key(sensor, cfg.scenes)
