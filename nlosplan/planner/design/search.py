@@ -43,28 +43,19 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
-from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
 from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import Requirement
+from nlosplan.planner.design.search_config import DEFAULT_MODELS, MAX_SEED, SEED_STRIDE, SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, Spread, metric_to_score, pooled_spread,
                                               score_to_metric, seed_interval, verdict)
 
 __all__ = ["SearchConfig", "DesignSearch", "axis_grid", "CONTINUOUS", "MORE_IS_BETTER", "metric_to_score",
            "score_to_metric", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
-
-#: The largest run seed (``--seed``): evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``),
-#: and they must stay below 2**32, scikit-learn's limit on the split's ``random_state``.
-MAX_SEED = 1_000_000
-SEED_STRIDE = 1000
-#: Candidate learners of the trained evaluator (the best per task is used).
-DEFAULT_MODELS = ("mlp", "cnn1d")
 
 CONTINUOUS = ("jitter_fwhm_ps", "pulse_fwhm_ps", "photon_fraction")
 #: Axes along which a larger value is more (better, costlier) hardware.
@@ -73,71 +64,6 @@ MORE_IS_BETTER = {"zones": True, "bin_factor": False, "n_bins": True, "jitter_fw
 _CURVE_AXES = ("jitter_fwhm_ps", "photon_fraction")  # also per zone layout
 #: Axes the learner's metric is taken to be monotone in (bisection; implied verdicts on the curves).
 MONOTONE = CONTINUOUS + ("n_bins",)
-
-
-@dataclass(frozen=True)
-class SearchConfig:
-    """Knobs of the search.
-
-    Parameters
-    ----------
-    grid_points : int
-        Points of each continuous axis grid (and of the bins grid).
-    refine_steps : int
-        Bisection steps after the grid.
-    seeds : int
-        Seeds of the verification (and of the learners on the reference design).
-    candidates : int
-        Cheapest candidates verified per task (optimized, and as many scanned).
-    optimize_evals : int
-        COBYLA evaluations per discrete choice.
-    fidelity : dict
-        Knobs per evaluator (see :data:`~nlosplan.planner.design.evaluators.DEFAULT_FIDELITY`).
-    seed : int
-        The run's seed, 0 to :data:`MAX_SEED` (``--seed``).
-    models : tuple of str
-        Candidate learners (:data:`~nlosplan.tasks.names.MODEL_NAMES`); the best on the reference design
-        is used per task.
-    max_seeds : int
-        Most seeds of one design (and of one design in one world) while it is undecided.
-    budget : int
-        Extra evaluations the run may spend deciding undecided candidates (decide and worlds stages).
-    """
-
-    grid_points: int = 6
-    refine_steps: int = 2
-    seeds: int = 3
-    candidates: int = 2
-    optimize_evals: int = 15
-    fidelity: dict = field(default_factory=lambda: {k: dict(v) for k, v in DEFAULT_FIDELITY.items()})
-    seed: int = 0
-    models: tuple = DEFAULT_MODELS
-    max_seeds: int = 8
-    budget: int = 30
-
-    def __post_init__(self) -> None:
-        from nlosplan.tasks.names import MODEL_NAMES, check_names
-
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
-            raise UserError(f"seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
-        for name, lo in (("grid_points", 2), ("refine_steps", 0), ("seeds", 1), ("candidates", 1),
-                         ("optimize_evals", 1), ("budget", 0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise UserError(f"[search] {name}={v!r} must be a whole number >= {lo}")
-        if isinstance(self.max_seeds, bool) or not isinstance(self.max_seeds, int) or not \
-                self.seeds <= self.max_seeds <= SEED_STRIDE // 10:
-            raise UserError(f"[search] max_seeds={self.max_seeds!r} must be a whole number from seeds "
-                            f"({self.seeds}) to {SEED_STRIDE // 10}")
-        models = (self.models,) if isinstance(self.models, str) else tuple(self.models)
-        object.__setattr__(self, "models", tuple(check_names("model(s)", models, MODEL_NAMES)))
-
-    def seed_of(self, i: int) -> int:
-        """The evaluation seed of a design's ``i``-th run."""
-        return self.seed * SEED_STRIDE + int(i)
-
-    def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
 
 
 def axis_grid(space: DesignSpace, axis: str, points: int, base: Design) -> list[Design]:
