@@ -35,14 +35,8 @@ demo: setup
 
 # Tests marked slow (whole-catalog and end-to-end runs that have faster siblings) run only
 # when CI is set (CI=true make test, as .ci/run is called) or with SLOW=1.
-# The live view's tests (a Bokeh server, a headless browser driven through greenlets) run in a
-# pytest process of their own, after the others: once they had run, a later XLA compilation in
-# the same process crashed (SIGSEGV) twice in full runs, at different tests.
-MARK = $(if $(or $(CI),$(SLOW)),,-m "not slow")
-LIVE_TESTS = tests/test_live_browser.py tests/test_live_cli.py tests/test_live_rig.py tests/test_live_design.py
 test: setup
-	$(BIN)/python -m pytest -q $(MARK) $(addprefix --ignore=,$(LIVE_TESTS))
-	$(BIN)/python -m pytest -q $(MARK) $(LIVE_TESTS)
+	$(BIN)/python -m pytest -q $(if $(or $(CI),$(SLOW)),,-m "not slow")
 
 check: setup
 	$(BIN)/nlosplan check
