@@ -63,7 +63,9 @@ def _warn_zone_mode(args) -> None:
     text = (f"--zones {rows}x{cols} changes only the zone grid of {sensor.name} ({sensor.zones_rows}x"
             f"{sensor.zones_cols}): it keeps its {sensor.fov_x_deg:g}x{sensor.fov_y_deg:g} deg field of view and "
             f"{sensor.iterations} iterations")
-    match = [preset(n) for n in PRESET_NAMES if (preset(n).zones_rows, preset(n).zones_cols) == (rows, cols)]
+    family = sensor.name.split("-")[0]   # a preset of the same family first (tmf8828-..., denali-...)
+    names = sorted(PRESET_NAMES, key=lambda n: n.split("-")[0] != family)
+    match = [preset(n) for n in names if (preset(n).zones_rows, preset(n).zones_cols) == (rows, cols)]
     if match:
         m = match[0]
         text += (f"; the {rows}x{cols} preset has {m.fov_x_deg:g}x{m.fov_y_deg:g} deg and {m.iterations} iterations "
