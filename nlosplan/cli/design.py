@@ -18,8 +18,9 @@ photon budget) that does each NLOS task on the DENALI rig, and write a report.
 With no options: the DENALI preset (tmf8828-3x3-short as the reference), the three
 tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
 size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
-32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 15 minutes on
-2 cores; --quick runs a reduced space in about 3 minutes.
+32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 30 minutes on
+2 cores; --quick runs a reduced space in about 3 minutes (references are cached by content:
+a second run with the same sensor model and scenes does not simulate them again).
 
 Metrics: loc_rmse is DENALI's localization RMSE, metres: sqrt of the mean of the squared
 x and y errors pooled over the N x 2 entries (loc<=X means loc_rmse <= X); top1_acc is
@@ -175,7 +176,8 @@ def add(sub) -> None:
                    "the least hardware per NLOS task on the DENALI rig: search, verify, report (the main job)",
                    description=DESCRIPTION)
     p.add_argument("--quick", action="store_true",
-                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects): about 2 minutes")
+                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects, 4 worlds): about 3 "
+                        "minutes")
     p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
                                                      "(see nlosplan/planner/design/config.py for the tables)")
     p.add_argument("--requirement", action="append", type=_requirement, metavar="REQ",
