@@ -203,7 +203,7 @@ def test_time_walk_of_a_scene_is_unchanged_by_an_object_outside_the_window():
     from nlosplan.simulators import FastSimulator, corner_scene
 
     scene = corner_scene(object_xy=(0.45, 10.0), wall_size=(20.0, 10.0))
-    sensor = preset("tmf8828-3x3-short")
+    sensor = preset("tmf8828-3x3-plane-unit")   # the preset with a fitted time walk
     assert sensor.time_walk_ps != 0
     far = FastSimulator(scene, sensor, fidelity="draft", dtype="float64")
     bg = FastSimulator(scene.without_objects(), sensor, fidelity="draft", dtype="float64")

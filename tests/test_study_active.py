@@ -74,7 +74,7 @@ def test_settings_and_cli_errors(capsys, tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[study\n")
     code, _, err = run(capsys, "study", "active-vs-raster", "--config", str(bad))
-    assert code == 2 and err.count("\n") == 1 and "cannot read study config" in err
+    assert code == 2 and err.count("\n") == 1 and "study config" in err and "is not valid TOML" in err
     code, _, err = run(capsys, "study", "active-vs-raster", "--seeds", "a,b")
     assert code == 2 and "seeds are comma-separated integers" in err
     code, _, err = run(capsys, "study", "active-vs-raster", "--object", "Q", "--grid", "2", "--quiet")
