@@ -18,8 +18,8 @@ photon budget) that does each NLOS task on the DENALI rig, and write a report.
 With no options: the DENALI preset (tmf8828-3x3-short as the reference), the three
 tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
 size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
-32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 30 minutes on
-2 cores; --quick runs a reduced space in about 3 minutes (references are cached by content:
+32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 13 minutes on
+2 idle cores; --quick runs a reduced space in about 3 minutes (references are cached by content:
 a second run with the same sensor model and scenes does not simulate them again).
 
 Metrics: loc_rmse is DENALI's localization RMSE, metres: sqrt of the mean of the squared
