@@ -102,13 +102,19 @@ def test_soft_limit_alarm_halts_everything_until_a_soft_reset(grbl_device):
     g.close()
 
 
-def test_feed_hold_and_resume(grbl_device):
+def _moving_to_150(grbl_device):
+    """A prepared gantry at fast settings, moving from 0 to x = 150 mm."""
     g = _open(grbl_device)
     g.prepare()
     for k, v in FAST.items():
         g.set_setting(k, v)
     g.move_to(150.0, 0.0, feed_mm_min=20000, wait=False)
     _moving(g)
+    return g
+
+
+def test_feed_hold_and_resume(grbl_device):
+    g = _moving_to_150(grbl_device)
     g.feed_hold()
     deadline = time.monotonic() + 5
     while (st := g.status()).substate != "0":   # GRBL may answer a '?' sent right after '!' before holding
@@ -122,12 +128,7 @@ def test_feed_hold_and_resume(grbl_device):
 
 
 def test_reset_in_motion_gives_alarm_3_and_a_lock(grbl_device):
-    g = _open(grbl_device)
-    g.prepare()
-    for k, v in FAST.items():
-        g.set_setting(k, v)
-    g.move_to(150.0, 0.0, feed_mm_min=20000, wait=False)
-    _moving(g)
+    g = _moving_to_150(grbl_device)
     assert g.soft_reset().startswith("Grbl 1.1h")
     st = g.status()
     assert g.alarm == 3 and st.state == "Alarm" and 0 < st.mpos[0] < 150

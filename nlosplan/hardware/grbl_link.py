@@ -14,7 +14,7 @@ from collections import deque
 
 from nlosplan.errors import UserError
 from nlosplan.hardware.grbl_protocol import CRITICAL_ALARMS, GrblAlarm, GrblError, Status, parse_status
-from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, LineReader, open_serial
+from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, LineReader, close_serial, open_serial
 
 __all__ = ["RX_BUFFER", "GrblLink"]
 
@@ -251,11 +251,8 @@ class GrblLink:
 
     def close(self) -> None:
         """Close the port (if this driver opened it)."""
-        if self._owned and self._ser is not None:
-            try:
-                self._ser.close()
-            except Exception:  # noqa: BLE001 - closing a dead port
-                pass
+        close_serial(self._ser, self._owned)
+        if self._owned:
             self._ser = None
 
     def __enter__(self):

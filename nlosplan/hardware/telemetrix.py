@@ -28,7 +28,7 @@ from nlosplan.errors import UserError
 from nlosplan.hardware import telemetrix_protocol as tp
 from nlosplan.hardware.gantry import GantryPosition, WrongFirmware, check_box, probe_firmware
 from nlosplan.hardware.telemetrix_config import TelemetrixConfig
-from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, open_serial
+from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, close_serial, open_serial
 
 __all__ = ["TelemetrixError", "TelemetrixGantry"]
 
@@ -245,11 +245,8 @@ class TelemetrixGantry:
 
     def close(self) -> None:
         """Close the port (if this driver opened it); the steppers stay enabled (holding torque)."""
-        if self._owned and self._ser is not None:
-            try:
-                self._ser.close()
-            except Exception:  # noqa: BLE001 - closing a dead port
-                pass
+        close_serial(self._ser, self._owned)
+        if self._owned:
             self._ser = None
 
     def __enter__(self) -> "TelemetrixGantry":

@@ -18,7 +18,8 @@ import time
 
 from nlosplan.errors import UserError
 from nlosplan.hardware.tmf8828_protocol import Frame, FrameAssembler, RangeMode, ZoneMode, start_sequence
-from nlosplan.hardware.transport import TMF8828_BAUDS, ConnectionLost, DeviceTimeout, LineReader, open_serial
+from nlosplan.hardware.transport import (TMF8828_BAUDS, ConnectionLost, DeviceTimeout, LineReader, close_serial,
+                                         open_serial)
 
 __all__ = ["TMF8828", "SensorError", "SensorGarbage"]
 
@@ -264,11 +265,7 @@ class TMF8828:
         raise SensorError(f"TMF8828 on {self.port_name} did not come back within {timeout:g} s ({last})")
 
     def _close_port(self) -> None:
-        if self._owned and self._ser is not None:
-            try:
-                self._ser.close()
-            except Exception:  # noqa: BLE001 - a dead port may fail to close; it is gone either way
-                pass
+        close_serial(self._ser, self._owned)
 
     def close(self) -> None:
         """Stop measuring and close the port (if this driver opened it)."""

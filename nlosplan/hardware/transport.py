@@ -12,7 +12,7 @@ import time
 
 from nlosplan.errors import UserError
 
-__all__ = ["ConnectionLost", "DeviceTimeout", "LineReader", "open_serial"]
+__all__ = ["ConnectionLost", "DeviceTimeout", "LineReader", "close_serial", "open_serial"]
 
 #: Baud rates the TMF8828 firmwares use (ams example, UW-Madison readers, DENALI).
 TMF8828_BAUDS = (115200, 1_000_000, 2_000_000)
@@ -60,6 +60,18 @@ def open_serial(port, baudrate: int, *, read_timeout: float = 0.05):
     except (serial.SerialException, OSError, ValueError) as exc:
         raise UserError(f"cannot open serial port {port!r}: {exc}") from None
     return ser, True
+
+
+def close_serial(ser, owned: bool) -> None:
+    """Close a port :func:`open_serial` opened (``owned``); one given open is the caller's to close.
+
+    A dead port may fail to close; it is gone either way, so that error is dropped.
+    """
+    if owned and ser is not None:
+        try:
+            ser.close()
+        except Exception:  # noqa: BLE001 - closing a dead port
+            pass
 
 
 class LineReader:
