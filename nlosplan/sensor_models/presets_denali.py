@@ -67,6 +67,8 @@ DENALI_SCENE_INTERVALS: dict = {
     "early_residual_counts": (48.76, 3.71, 43.87, 56.84),
     "early_residual_decay_bins": (2.716, 0.419, 2.032, 3.494),
 }
+#: The diffuse base's range where no interval above gives one: the model variants Table 2 cannot decide (0-0.3).
+DENALI_DIFFUSE_RANGE = (0.0, 0.3)
 #: Provenance shown by ``nlosplan sensor show`` / ``sensor list``.
 DENALI_PROVENANCE = (
     "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6): facts of DENALI's capture code; zones, "

@@ -4,7 +4,7 @@ A TOML file may hold any of these tables (all optional; what is missing
 keeps the default of the chosen mode)::
 
     [space]                      # DesignSpace fields
-    reference = "tmf8828-3x3-short"
+    reference = "denali-tmf8828-3x3"   # the default; DENALI presets bring their fitted scene
     zones = ["1x1", "3x3", "8x8"]
     jitter_fwhm_ps = [0, 800]
 
@@ -30,6 +30,8 @@ keeps the default of the chosen mode)::
     count = 8                    # --worlds
     quorum = 0.9                 # a minimum design must be met in this fraction of them
     scene_step = 2               # worlds simulate every 2nd position of the run's scenes
+    candidates = 4               # most candidates examined per requirement until one holds
+    seed = 0                     # the worlds' draw (the same for every --seed)
     [worlds.ranges]              # what no data pins down (replaces the defaults when given)
     albedo = {low = 0.3, high = 0.7}
     photon_scale = {low = 0.5, high = 2.0, relative = true, log = true}
@@ -76,7 +78,7 @@ def quick_config() -> DesignConfig:
                           max_seeds=4, budget=8)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
-    worlds = WorldsConfig(count=4, scene_step=2, candidates=2)
+    worlds = WorldsConfig(count=4, scene_step=2, candidates=3)
     return DesignConfig(space=space, search=search, scenes=scenes, label="quick", worlds=worlds)
 
 

@@ -58,9 +58,14 @@ class SceneSet:
         Simulator of the reference histograms: the fast JAX backend, or the Mitsuba 3 twin (about
         0.1 s per scene and zone layout on 2 cores; it measures the relay wall only). The bound
         scenes' Jacobians always come from the fast backend (the twin is not differentiated here).
-    scene_kwargs : tuple of (str, float)
+    scene_kwargs : tuple of (str, float or bool)
         Keyword arguments of every :func:`~nlosplan.simulators.denali_scene` (a world's scene overrides,
-        e.g. ``(("albedo", 0.4),)``).
+        e.g. ``(("albedo", 0.4),)``); they replace the scene model's.
+    model : str
+        The calibrated scene model the reference sensor comes with
+        (:func:`~nlosplan.simulators.presets.scene_model.scene_model`: ``"denali-tmf8828-3x3"`` — the
+        Table-2 fit's albedo, diffuse base and mount in the signal), or ``""`` for the scene's defaults.
+        :class:`~nlosplan.planner.design.run.DesignConfig` sets it from the space's reference.
     """
 
     objects: tuple[str, ...]
@@ -73,12 +78,20 @@ class SceneSet:
     fidelity: str = "low"
     backend: str = "fast"
     scene_kwargs: tuple = ()
+    model: str = ""
 
     def __post_init__(self) -> None:
         if self.backend not in ("fast", "mitsuba"):
             raise UserError(f"unknown simulation backend {self.backend!r}; allowed: fast, mitsuba")
         kw = self.scene_kwargs.items() if isinstance(self.scene_kwargs, dict) else self.scene_kwargs
-        object.__setattr__(self, "scene_kwargs", tuple(sorted((str(k), float(v)) for k, v in kw)))
+        object.__setattr__(self, "scene_kwargs", tuple(sorted(
+            (str(k), bool(v) if isinstance(v, bool) else float(v)) for k, v in kw)))
+
+    def options(self) -> dict:
+        """The :func:`~nlosplan.simulators.denali_scene` keywords of every scene: the model's, then ``scene_kwargs``."""
+        from nlosplan.simulators.presets.scene_model import scene_options
+
+        return {**scene_options(self.model), **dict(self.scene_kwargs)}
 
     def to_dict(self) -> dict:
         out = {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
@@ -86,7 +99,18 @@ class SceneSet:
             del out["scene_kwargs"]
         else:
             out["scene_kwargs"] = [list(kv) for kv in self.scene_kwargs]
+        if not self.model:  # nor that of a sensor without a calibrated scene model
+            del out["model"]
+        else:
+            out["scene_options"] = self.options()  # the values, so a refit of the model changes the key
         return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SceneSet":
+        """From :meth:`to_dict` (lists as tuples; ``scene_options`` is derived, not read)."""
+        kw = {k: tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list) else v
+              for k, v in data.items() if k != "scene_options"}
+        return cls(**kw)
 
     @property
     def n_scenes(self) -> int:
@@ -236,7 +260,7 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
 
     t0 = time.perf_counter()
     labels = _scene_labels(scenes.objects, scenes.sizes, scenes.positions, scenes.lights)
-    kw = dict(scenes.scene_kwargs)
+    kw = scenes.options()
     means = []
     for obj in scenes.objects:  # one object at a time: bounded memory, a progress step each
         batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw) for s in scenes.sizes for p in scenes.positions]

@@ -35,10 +35,6 @@ __all__ = ["STAGES", "design_progress", "search_from_files"]
 STAGES = ("references",) + tuple(s for s in DesignSearch.STAGES if s != "done") + ("finishing", "done")
 
 
-def _tuples(d: dict) -> dict:
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
-
-
 def _reference_paths(out: Path, space: DesignSpace, scenes: SceneSet, cfg: dict) -> tuple[dict, dict]:
     """The reference files a run of this configuration uses (the names its evaluation keys carry)."""
     sims = {}
@@ -80,7 +76,7 @@ def search_from_files(out, results: list[dict] | None = None) -> tuple[DesignSea
         space = DesignSpace.from_dict(cfg["space"])
         reqs = [Requirement.from_dict(r) for r in cfg["requirements"]]
         search_cfg = SearchConfig(**cfg["search"])
-        scenes = SceneSet(**_tuples(cfg["scenes"]))
+        scenes = SceneSet.from_dict(cfg["scenes"])
         cost = CostModel.from_dict(cfg["cost"])
     except (OSError, json.JSONDecodeError) as exc:
         raise UserError(f"cannot read the design checkpoint {out / CHECKPOINT}: {exc}") from None

@@ -8,7 +8,14 @@ model at the worlds' scenes) at the same seeds, and its metric in world
 module). A world's verdict is the three-valued one of that interval; an
 undecided world gets one more seed pair while the run's budget lasts. The
 first candidate met in at least ``quorum`` of the worlds is the
-requirement's minimum hardware; for each candidate the report says in how
+requirement's minimum hardware. Once a candidate fails, the next one is not
+simply the next cheapest (at the requirement's margin those fail alike, and
+which of them a seed happens to examine decided the answer): it is the
+cheapest design verified *met* anywhere in the search (optimized, or on the
+scans) whose pessimistic margin exceeds the largest loss any world caused
+to the candidates examined so far, else the one with the largest margin
+(:func:`next_candidate`); so the examination climbs to a design robust to
+the worlds instead of stopping at the margin; for each candidate the report says in how
 many worlds it holds and which world parameter breaks it (the one whose
 values rank most closely with the candidate's margin across the worlds).
 """
@@ -153,18 +160,69 @@ def _attribution(req, worlds, per) -> dict:
     return {"sensitivity": rho, "breaks": text, "driver": driver}
 
 
+def _goodness(req, value: float) -> float:
+    """The score of a metric value oriented so that higher is better (log RMSE negated, logit accuracy)."""
+    z = metric_to_score(req, value)
+    return -z if req.smaller_is_better else z
+
+
+def worst_loss(req, done: list[dict]) -> float:
+    """The largest loss (score scale, >= 0) a world caused to any candidate in ``done`` (complete statuses)."""
+    worst = 0.0
+    for c in done:
+        for v in (c["status"] or {}).get("per_world", []):
+            e = v.get("effect", math.nan)
+            if math.isfinite(e):
+                worst = max(worst, e if req.smaller_is_better else -e)
+    return worst
+
+
+def next_candidate(search, req, done: list[dict]) -> dict | None:
+    """After a failed candidate: the cheapest met design whose pessimistic margin exceeds the worst world loss.
+
+    Candidates are every design of the task verified *met* (the optimized and scanned candidates and the
+    scans' trained designs) not examined yet; the margin is on the score scale, from the pessimistic end of
+    the design's interval. None fit: the one with the largest margin (None when nothing is left).
+    """
+    seen = {c["design"] for c in done}
+    loss = worst_loss(req, done)
+    threshold = _goodness(req, req.threshold)
+    pool = {c["design"]: c for c in search.ordered_candidates(req)}
+    for d in search.trained_designs(req):
+        if d not in pool:
+            pool[d] = {"design": d, "cost": search.cost(d, search.space), "trained": search.trained_value(req, d),
+                       "source": "scans, examined after a cheaper candidate failed in the worlds"}
+    rows = []
+    for d, c in pool.items():
+        tv = c["trained"]
+        if d in seen or tv is None or tv["verdict"] != MET:
+            continue
+        pessimistic = tv["hi"] if req.smaller_is_better else tv["lo"]
+        rows.append((_goodness(req, pessimistic) - threshold, c))
+    if not rows:
+        return None
+    robust_enough = [c for m, c in rows if m > loss]
+    if robust_enough:
+        return min(robust_enough, key=lambda c: (c["cost"], c["design"]))
+    return max(rows, key=lambda r: (r[0], -r[1]["cost"]))[1]
+
+
 def examined(search, req) -> list[dict]:
     """The requirement's met candidates in the order the worlds examine them, each with its ``status``.
 
-    The list stops after the first candidate that holds; a candidate whose status is None is being examined.
+    The cheapest met candidate first; after a candidate that does not hold, :func:`next_candidate`. At most
+    ``[worlds] candidates``; the list stops after the first candidate that holds; a candidate whose status is
+    None is being examined.
     """
     cands = [c for c in search.ordered_candidates(req) if c["trained"] is not None and c["trained"]["verdict"] == MET]
-    out = []
-    for c in cands[: search.worlds.config.candidates]:
+    out: list[dict] = []
+    c = cands[0] if cands else None
+    while c is not None and len(out) < search.worlds.config.candidates:
         st = world_status(search, req, c["design"])
         out.append({**c, "status": st})
         if st is None or st["holds"]:
             break
+        c = next_candidate(search, req, out)
     return out
 
 

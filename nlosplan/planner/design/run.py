@@ -71,6 +71,12 @@ class DesignConfig:
         ``"full"`` or ``"quick"`` (for the report).
     worlds : WorldsConfig
         The plausible worlds the cheapest met candidates are checked in (not with ``real``).
+
+    Notes
+    -----
+    ``scenes.model`` always follows the space's reference: a DENALI-calibrated reference
+    (``denali-tmf8828-3x3``, the default) simulates its scenes with the scene parameters it was fitted
+    with (:mod:`~nlosplan.simulators.presets.scene_model`), any other with the scene's defaults.
     """
 
     space: DesignSpace = field(default_factory=DesignSpace)
@@ -83,6 +89,14 @@ class DesignConfig:
     capture_sensor: str | None = None
     label: str = "full"
     worlds: WorldsConfig = field(default_factory=WorldsConfig)
+
+    def __post_init__(self) -> None:
+        from nlosplan.simulators.presets.scene_model import scene_model
+
+        if self.scenes is not None:
+            model = scene_model(self.space.reference)
+            if self.scenes.model != model:
+                object.__setattr__(self, "scenes", replace(self.scenes, model=model))
 
     def to_dict(self) -> dict:
         return {"space": self.space.to_dict(), "requirements": [r.to_dict() for r in self.requirements],
@@ -452,10 +466,11 @@ def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
 
     space, wcfg = cfg.space, cfg.worlds
     unc, unc_source = uncertainty_for(space.reference)
-    worlds = draw_worlds(wcfg, space.sensor, cfg.scenes.lights, cfg.search.seed, unc)
+    worlds = draw_worlds(wcfg, space.sensor, cfg.scenes.lights, wcfg.seed, unc, cfg.scenes.model)
     step = wcfg.scene_step
     scenes = replace(cfg.scenes, positions=cfg.scenes.positions[::step], crlb_objects=())
-    ranges = [r for r in wcfg.resolved_ranges(cfg.scenes.lights) if r.name not in (unc or {}).get("parameters", {})]
+    ranges = [r for r in wcfg.resolved_ranges(cfg.scenes.lights, cfg.scenes.model)
+              if r.name not in (unc or {}).get("parameters", {})]
     sources = [f"declared ranges: {', '.join(r.name for r in ranges)}" if ranges else "no declared ranges",
                f"calibrated: {', '.join(unc['parameters'])} ({unc_source})" if unc else f"no calibration ({unc_source})"]
     return robust.WorldPlan(wcfg, worlds, scenes, cfg.scenes.n_scenes / scenes.n_scenes, sources=sources)

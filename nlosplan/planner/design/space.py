@@ -7,10 +7,11 @@ exposure x efficiency). :meth:`Design.sensor` turns it into a
 :class:`~nlosplan.sensor_models.SensorConfig` built on the reference sensor,
 so every other command can use a design.
 
-Defaults are the TMF8828 class (``tmf8828-3x3-short``: 3x3 zones, 128 bins of
-92.8 ps, the measured pulse): zones 1x1 to 8x8, bins merged up to 8x, 32 to
-128 bins, jitter 0 to 1000 ps, pulse 0 to 1000 ps, 1 % to 100 % of the
-photons.
+Defaults are DENALI's TMF8828 as calibrated on the real Table 2
+(``denali-tmf8828-3x3``: 3x3 zones, 128 bins of 92.8 ps, the measured pulse,
+10.24 M iterations, the real floor of ~10^3 counts per bin): zones 1x1 to
+8x8, bins merged up to 8x, 32 to 128 bins, jitter 0 to 1000 ps, pulse 0 to
+1000 ps, 1 % to 100 % of the photons.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models import SensorConfig, resolve_sensor
+from nlosplan.simulators.presets.scene_model import DEFAULT_SENSOR
 
 __all__ = ["AXES", "Design", "DesignSpace", "parse_zones"]
 
@@ -155,7 +157,7 @@ class DesignSpace:
         Parameters scanned one at a time for the per-parameter requirements (from :data:`AXES`).
     """
 
-    reference: str = "tmf8828-3x3-short"
+    reference: str = DEFAULT_SENSOR
     zones: tuple[tuple[int, int], ...] = ((1, 1), (2, 2), (3, 3), (4, 4), (8, 8))
     bin_factors: tuple[int, ...] = (1, 2, 4, 8)
     n_bins: tuple[int, int] = (32, 128)

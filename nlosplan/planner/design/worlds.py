@@ -141,8 +141,10 @@ class WorldRange:
         return {"name": self.name, "low": self.low, "high": self.high, "relative": self.relative, "log": self.log}
 
 
-def default_ranges(lights: str = "off") -> tuple[WorldRange, ...]:
+def default_ranges(lights: str = "off", model: str = "") -> tuple[WorldRange, ...]:
     """What no data pins down on the DENALI rig, as ranges (assumed; state yours in ``[worlds.ranges]``).
+
+    With a sensor of no calibrated scene model (``model=""``, e.g. ``tmf8828-3x3-short``):
 
     - ``albedo`` 0.3-0.7: the objects' retroreflective albedo (the preset assumes 0.5);
     - ``diffuse_albedo`` 0-0.2: a diffuse base under the retroreflection, where
@@ -151,7 +153,23 @@ def default_ranges(lights: str = "off") -> tuple[WorldRange, ...]:
       x0.5-5 with them off (the room light the measured rate came from is not DENALI's);
     - ``photon_scale`` x0.5-2 (log): the photon budget was measured on another TMF882x and target;
     - ``jitter_fwhm_ps`` 0-150 ps: timing blur beyond the measured pulse shape.
+
+    With a DENALI-calibrated sensor (``model="denali-tmf8828-3x3"``, the default reference) the fit
+    pins the photon scale, the floor and the albedo: the scene parameters' ranges are the fit's
+    intervals (:data:`~nlosplan.sensor_models.presets_denali.DENALI_SCENE_INTERVALS`: its bootstrap and
+    model-variant refits), the diffuse base spans the variants Table 2 cannot decide, the sensor
+    parameters come from the preset's shipped uncertainty (:func:`draw_worlds`), and only the timing
+    blur beyond the measured pulse stays a declared range.
     """
+    if model:
+        from nlosplan.sensor_models.presets_denali import DENALI_SCENE_INTERVALS, DENALI_DIFFUSE_RANGE
+
+        scene = set(scene_parameters())
+        ranges = [WorldRange(n, float(iv[2]), float(iv[3])) for n, iv in sorted(DENALI_SCENE_INTERVALS.items())
+                  if n in scene and iv[2] < iv[3]]
+        if "diffuse_albedo" in scene and "diffuse_albedo" not in DENALI_SCENE_INTERVALS:
+            ranges.append(WorldRange("diffuse_albedo", *DENALI_DIFFUSE_RANGE))
+        return tuple(ranges) + (WorldRange("jitter_fwhm_ps", 0.0, 150.0),)
     ranges = [WorldRange("albedo", 0.3, 0.7)]
     if "diffuse_albedo" in scene_parameters():
         ranges.append(WorldRange("diffuse_albedo", 0.0, 0.2))
@@ -179,16 +197,26 @@ class WorldsConfig:
         The worlds' scenes: every ``scene_step``-th gantry position of the run's (1: the same scenes,
         and world 0 is the run's own reference).
     candidates : int
-        Met candidates per requirement checked in the worlds, cheapest first, until one holds.
+        Most candidates per requirement checked in the worlds, until one holds (the cheapest met one, then
+        designs robust to the losses seen: :func:`~nlosplan.planner.design.robust.next_candidate`).
+    seed : int
+        Seed of the worlds' draw. The worlds sample the model's uncertainty, not a run's noise: they stay the
+        same for every ``--seed`` (which redraws noise, splits and training), so two seeds judge their
+        designs in the same worlds; change it to see other worlds.
     """
 
     count: int = 8
     quorum: float = 0.9
     ranges: tuple[WorldRange, ...] | None = None
     scene_step: int = 2
-    candidates: int = 3
+    candidates: int = 4
+    seed: int = 0
 
     def __post_init__(self) -> None:
+        from nlosplan.resources import MAX_SEED
+
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
+            raise UserError(f"[worlds] seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
         for name, lo in (("count", 1), ("scene_step", 1), ("candidates", 1)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -202,8 +230,9 @@ class WorldsConfig:
             if dup:
                 raise UserError(f"[worlds.ranges] {', '.join(dup)} given twice")
 
-    def resolved_ranges(self, lights: str) -> tuple[WorldRange, ...]:
-        return self.ranges if self.ranges is not None else default_ranges(lights)
+    def resolved_ranges(self, lights: str, model: str = "") -> tuple[WorldRange, ...]:
+        """The declared ranges: the config's, else :func:`default_ranges` of the lights and scene model."""
+        return self.ranges if self.ranges is not None else default_ranges(lights, model)
 
     def needed(self) -> int:
         """Worlds a design must be met in."""
@@ -211,15 +240,15 @@ class WorldsConfig:
 
     def to_dict(self) -> dict:
         return {"count": self.count, "quorum": self.quorum, "scene_step": self.scene_step,
-                "candidates": self.candidates,
+                "candidates": self.candidates, "seed": self.seed,
                 "ranges": None if self.ranges is None else [r.to_dict() for r in self.ranges]}
 
     @classmethod
     def from_dict(cls, data: dict, base: "WorldsConfig | None" = None) -> "WorldsConfig":
         """From a TOML ``[worlds]`` table (``[worlds.ranges]``: ``name = {low, high, relative, log}``)."""
         base = base or cls()
-        check_keys(data, ("candidates", "count", "quorum", "ranges", "scene_step"), "[worlds] key(s)")
-        kw = {k: data[k] for k in ("count", "quorum", "scene_step", "candidates") if k in data}
+        check_keys(data, ("candidates", "count", "quorum", "ranges", "scene_step", "seed"), "[worlds] key(s)")
+        kw = {k: data[k] for k in ("count", "quorum", "scene_step", "candidates", "seed") if k in data}
         if "ranges" in data:
             table = data["ranges"]
             if not isinstance(table, dict) or not table:
@@ -259,7 +288,7 @@ def _lhs(rng, k: int) -> np.ndarray:
 
 
 def draw_worlds(cfg: WorldsConfig, reference: SensorConfig, lights: str, seed: int,
-                uncertainty: dict | None = None) -> list[World]:
+                uncertainty: dict | None = None, model: str = "") -> list[World]:
     """World 0 (nominal) and ``cfg.count`` drawn worlds (see the module notes).
 
     Parameters
@@ -273,11 +302,13 @@ def draw_worlds(cfg: WorldsConfig, reference: SensorConfig, lights: str, seed: i
         The run's seed (the draws are reproducible from it).
     uncertainty : dict, optional
         A validated parameter uncertainty (:func:`~nlosplan.sensor_models.uncertainty.validate_uncertainty`).
+    model : str
+        The scenes' calibrated scene model (picks the default ranges, :func:`default_ranges`).
     """
     rng = np.random.default_rng([int(seed), 17])
     calibrated = {n: p for n, p in (uncertainty or {}).get("parameters", {}).items()
                   if n in sensor_parameters()}  # a calibrated bin width or zone count is the design's, not a world's
-    ranges = [r for r in cfg.resolved_ranges(lights) if r.name not in calibrated]
+    ranges = [r for r in cfg.resolved_ranges(lights, model) if r.name not in calibrated]
     for r in ranges:
         r.check(reference)
     k = cfg.count
