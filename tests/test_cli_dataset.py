@@ -31,16 +31,26 @@ def test_build_json_then_resume_then_info(capsys, tmp_path):
     assert code == 0, err
     s = json.loads(out)
     assert (s["captures_added"], s["captures_total"], s["positions"]) == (4, 4, [0, 1])
-    assert s["sensor"] == "tmf8828-3x3-short"
+    assert s["sensor"] == "denali-tmf8828-3x3"  # DENALI's calibrated unit, with the scene it was fitted with
+    assert s["scene_options"]["mount"] is True and s["scene_options"]["albedo"] == pytest.approx(0.3667)
+    assert s["scene_options"]["mount_in_background"] is False and s["scene_options"]["diffuse_albedo"] == 0.2
     code, out, _ = run(capsys, *BUILD, "--store", store)
     assert code == 0 and out.startswith("stored 0 new captures") and "4 of 4 were there already" in out
     code, out, _ = run(capsys, "dataset", "info", "--store", store, "--json")
     info = json.loads(out)
     assert info["captures"] == 4 and info["groups"] == [dict(source="sim:fast", zones="3x3", lights="off", size="4in",
                                                               objects=1, positions=2, repeats=2, captures=4)]
-    assert info["sensors"][0]["name"] == "tmf8828-3x3-short" and info["sensors"][0]["captures"] == 4
+    assert info["sensors"][0]["name"] == "denali-tmf8828-3x3" and info["sensors"][0]["captures"] == 4
     code, out, _ = run(capsys, "dataset", "info", "--store", store, "--by-object")
     assert code == 0 and "4 captures" in out and "sim:fast" in out and "object" in out
+
+
+def test_build_with_a_generic_sensor_keeps_the_scene_defaults(capsys, tmp_path):
+    code, out, err = run(capsys, *BUILD, "--sensor", "tmf8828-3x3-short", "--store", str(tmp_path / "g.sqlite"),
+                         "--json")
+    s = json.loads(out)
+    assert code == 0, err
+    assert s["sensor"] == "tmf8828-3x3-short" and s["scene_options"] == {"reflectance": "retroreflective"}
 
 
 def test_import_export_round_trip(capsys, tmp_path):

@@ -64,7 +64,10 @@ def test_denali_json_summary(denali):
     assert s["scene"]["kind"] == "denali"
     assert (s["scene"]["object"], s["scene"]["size"], s["scene"]["position"]) == ("A", "8in", 19)
     assert s["scene"]["lights"] == "off" and s["scene"]["reflectance"] == "retroreflective"
-    assert s["sensor"] == "tmf8828-3x3-short" and s["shape"] == [3, 3, 128] and s["zones"] is None
+    assert s["sensor"] == "denali-tmf8828-3x3" and s["shape"] == [3, 3, 128] and s["zones"] is None
+    # DENALI's calibrated unit brings the scene it was fitted with (Table 2): albedo, diffuse base, mount in signal
+    assert s["scene"]["albedo"] == pytest.approx(0.3667) and s["scene"]["diffuse_albedo"] == pytest.approx(0.2)
+    assert s["scene"]["mount"] is True and s["scene"]["mount_in_background"] is False
     assert s["totals"]["signal"] > 0
     assert s["totals"]["signal"] == pytest.approx(float(signal.sum(dtype=np.float64)), rel=1e-9)
     assert s["totals"]["expected"] == pytest.approx(float(expected.sum(dtype=np.float64)), rel=1e-9)
@@ -76,6 +79,36 @@ def test_denali_json_summary(denali):
     left_out = {t["name"]: t["reason"] for t in plan["left_out"]}
     assert left_out["ambient light"] == "lights off"
     assert any(t["name"] == "object 'A_8in'" for t in plan["computed"])
+
+
+def test_a_generic_sensor_keeps_the_scene_defaults_and_flags_override_the_scene_model(capsys, tmp_path):
+    code, out, _ = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--sensor", "tmf8828-3x3-short", "--json",
+                       "--out", str(tmp_path / "g"))
+    scene = json.loads(out)["scene"]
+    assert code == 0 and scene["albedo"] == 0.5 and scene["diffuse_albedo"] == 0.0 and scene["mount"] is False
+    code, out, _ = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--no-mount", "--object-albedo", "0.3", "--json",
+                       "--out", str(tmp_path / "n"))
+    scene = json.loads(out)["scene"]
+    assert code == 0 and scene["mount"] is False and scene["albedo"] == 0.3 and scene["diffuse_albedo"] == 0.2
+    code, out, _ = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--mount-in-background", "--json",
+                       "--out", str(tmp_path / "b"))
+    background_mount = json.loads(out)
+    assert code == 0 and background_mount["scene"]["mount"] is True
+    assert background_mount["scene"]["mount_in_background"] is True
+    code, out, _ = run(capsys, "simulate", *DRAFT, "--repeats", "0", "--json", "--out", str(tmp_path / "s"))
+    signal_mount = json.loads(out)
+    # the mount in the signal (the scene model) adds its Lambertian return to the object's
+    assert signal_mount["totals"]["signal"] > 1.05 * background_mount["totals"]["signal"]
+
+
+@pytest.mark.parametrize("flags, words", [
+    (("--mount", "--no-mount"), "--mount and --no-mount contradict"),
+    (("--mount-in-signal", "--mount-in-background"), "contradict each other"),
+    (("--sensor", "tmf8828-3x3-short", "--mount-in-signal"), "--mount-in-signal needs the mount"),
+])
+def test_contradicting_mount_flags_are_one_line(capsys, tmp_path, flags, words):
+    code, out, err = run(capsys, "simulate", *DRAFT, "--repeats", "0", *flags, "--out", str(tmp_path / "x"))
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "x").exists()
 
 
 def test_explain_text_and_no_noisy_captures(capsys, tmp_path, denali):
@@ -116,9 +149,9 @@ def test_zones_on_a_preset_of_another_zone_mode_warns_what_it_keeps(capsys):
     assert len(lines) == 1 and lines[0].startswith("nlosplan: warning: --zones 8x8 changes only the zone grid")
     from nlosplan.sensor_models import preset
 
-    three = preset("tmf8828-3x3-short")
-    assert f"keeps its 33x32 deg field of view and {three.iterations} iterations" in lines[0]
-    assert "--sensor tmf8828-8x8-short" in lines[0]
+    three = preset("denali-tmf8828-3x3")  # the default sensor: DENALI's unit
+    assert f"keeps its 41x52 deg field of view and {three.iterations} iterations" in lines[0]
+    assert "--sensor denali-tmf8828-8x8" in lines[0]
 
 
 def test_explain_says_what_the_mixture_and_the_mount_compute(capsys, tmp_path):
@@ -209,7 +242,7 @@ def test_wall_scene_writes_what_it_did_before(capsys, tmp_path):
         (["--scene", "denali", "--object-yaw", "10"], "--object-yaw 10.0"),
         (["--diffuse-albedo", "0.9"], "their sum must be <= 1"),
         (["--reflectance", "lambertian", "--diffuse-albedo", "0.2"], "diffuse albedo is its albedo"),
-        (["--mount-in-signal"], "--mount-in-signal needs --mount"),
+        (["--sensor", "tmf8828-3x3-short", "--mount-in-signal"], "--mount-in-signal needs the mount"),
         (["--scene", "wall", "--diffuse-albedo", "0.1"], "--diffuse-albedo"),
     ],
 )

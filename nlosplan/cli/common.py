@@ -151,7 +151,8 @@ EXAMPLES = {
     "bench histogram": "nlosplan bench histogram --json",
     "bench simulate": "nlosplan bench simulate --levels draft,low,default --reference-positions 0,45 --json",
     "dataset build": (
-        "nlosplan dataset build --scene denali --sensor tmf8828-3x3-short --store out/sim3x3.sqlite",
+        "nlosplan dataset build --scene denali --store out/sim3x3.sqlite     # DENALI's calibrated unit and scene",
+        "nlosplan dataset build --sensor tmf8828-3x3-short --store out/generic.sqlite   # the datasheet's unit",
         "nlosplan dataset build --objects A,S,circle --sizes 8in --positions 0-9,50-59 --lights on,off "
         "--repeats 3 --fidelity draft --seed 1 --store out/small.sqlite --json",
     ),

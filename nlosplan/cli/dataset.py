@@ -124,7 +124,10 @@ def _cmd_build(args) -> int:
     from nlosplan.files import writing
     from nlosplan.sensor_models import resolve_sensor
 
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
+
     sensor = resolve_sensor(args.sensor)
+    options = scene_options(scene_model(args.sensor))  # a calibrated sensor's fitted scene (albedo, base, mount)
     _check_store_target(args.store)
     _check_build_size(args, sensor)
     n = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights) * args.repeats
@@ -135,7 +138,8 @@ def _cmd_build(args) -> int:
         res, warned = _with_warning_lines(
             build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
             positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
-            seed=args.seed, reflectance=args.reflectance, batch=args.batch, progress=progress)
+            seed=args.seed, reflectance=args.reflectance, scene_options=options, batch=args.batch,
+            progress=progress)
     res["warnings"] = warned
     text = (f"stored {res['captures_added']} new captures in {res['store']} ({res['captures_skipped']} of "
             f"{res['captures_total']} were there already; {res['groups_skipped']} of {res['groups']} groups "
@@ -215,7 +219,14 @@ Simulate DENALI captures into a capture store (SQLite): every object x size x
 position x lights scene through the fast simulator, 'repeats' Poisson captures
 each, with noise seeds derived from the seed and the scene. Captures stored
 already are skipped, so an interrupted build resumes where it stopped and
-gives the same counts as an uninterrupted one."""
+gives the same counts as an uninterrupted one.
+
+The default sensor is DENALI's unit as calibrated on the real Table 2
+(denali-tmf8828-3x3: its real floor of ~10^3 counts per bin, 10.24 M
+iterations); its scenes take the scene parameters it was fitted with (retro
+albedo 0.37, a diffuse base of 0.2, the mount in the signal). Any other
+sensor (e.g. --sensor tmf8828-3x3-short, the datasheet's generic unit) keeps
+the scene's own defaults (albedo 0.5, no diffuse base, no mount)."""
 
 EXPORT_DESCRIPTION = """\
 Write the captures of a store that match the filters in the public DENALI
@@ -230,6 +241,8 @@ IMPORT_DESCRIPTION = """\
 Import the real DENALI captures: spad_histogram/NNN.npy of every
 <object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>_NLOSdata folder, one
 capture per repeat, (x, y) of capture number NNN from tag1_positions.json.
+The captures are stored with DENALI's unit as their sensor
+(denali-tmf8828-3x3 / -8x8) unless --sensor names another.
 Unknown folders and files are listed and skipped; captures stored already are
 skipped (rerun to resume). Files that need pickle are refused unless
 --trust-pickle is given."""
@@ -260,7 +273,9 @@ def add(sub) -> None:
                    description=BUILD_DESCRIPTION)
     b.add_argument("--store", required=True, help="capture store file (created when missing)")
     b.add_argument("--scene", choices=["denali"], default="denali", help="scene preset (default: denali)")
-    b.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
+    b.add_argument("--sensor", default="denali-tmf8828-3x3",
+                   help="preset name or sensor file (default: %(default)s, DENALI's unit calibrated on Table 2, "
+                        "whose scenes take the fitted retro albedo, diffuse base and mount in the signal)")
     b.add_argument("--objects", type=_objects, default=_objects("all"), metavar="A,S,...",
                    help="objects, class groups (numbers, letters, shapes) or 'all' (default: all 30)")
     b.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
@@ -291,7 +306,7 @@ def add(sub) -> None:
     i.add_argument("--positions-json", metavar="FILE", help="tag1_positions.json (default: the packaged DENALI one)")
     i.add_argument("--sensor", action="append", metavar="SPEC",
                    help="sensor for the folders of its zone mode (preset or file; repeatable; default: "
-                        "tmf8828-3x3-short and tmf8828-8x8-short)")
+                        "DENALI's unit, denali-tmf8828-3x3 and denali-tmf8828-8x8)")
     i.add_argument("--trust-pickle", action="store_true",
                    help="allow capture files that need pickle (they may run code when loaded): trusted data only")
     i.add_argument("--json", action="store_true", help="machine-readable summary")

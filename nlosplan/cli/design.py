@@ -163,6 +163,7 @@ def _cmd_design(args) -> int:
              "learners": [r for r in result["learners"] if r["chosen"]],
              "worlds": None if result["worlds"] is None else {k: result["worlds"][k] for k in
                                                               ("count", "quorum", "needed", "sources")},
+             "world_model": result.get("world_model"),
              "metric_definitions": result["metric_definitions"], "seed": result["provenance"]["seed"],
              "report": paths["html"], "wall_seconds": result["provenance"]["wall_seconds"],
              "evaluations": result["evaluations"]}

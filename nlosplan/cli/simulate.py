@@ -19,6 +19,8 @@ DEFAULT_OUT = "nlosplan-out/simulate"
 NLOS_SCENES = ("denali", "corner")
 
 
+#: The sensor of the corner and wall scenes when none is given (the datasheet's TMF8828 3x3).
+GENERIC_SENSOR = "tmf8828-3x3-short"
 #: Sensor flags of ``simulate``: flag, the argparse dest, the SensorConfig field, how the change is named.
 _SENSOR_FLAGS = (("--jitter-ps", "jitter_ps", "jitter_fwhm_ps", "jitter {} ps"), ("--bins", "bins", "n_bins", "{} bins"),
                  ("--bin-width-ps", "bin_width_ps", "bin_width_ps", "{} ps bins"))
@@ -136,6 +138,26 @@ def _with_warning_lines(func, *a, **kw):
     return result, messages
 
 
+def _denali_options(args, common: dict) -> dict:
+    """The DENALI scene's keywords: the sensor's calibrated scene model, then the options given."""
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
+
+    if args.mount and args.no_mount:
+        raise UserError("--mount and --no-mount contradict each other; give one")
+    if args.mount_in_signal and args.mount_in_background:
+        raise UserError("--mount-in-signal and --mount-in-background contradict each other; give one")
+    opts = {**scene_options(scene_model(args.sensor)), **common}
+    if args.mount or args.no_mount:
+        opts["mount"] = bool(args.mount)
+    if args.mount_in_signal or args.mount_in_background:
+        if not opts.get("mount"):
+            flag = "--mount-in-signal" if args.mount_in_signal else "--mount-in-background"
+            raise UserError(f"{flag} needs the mount (--mount, or a sensor whose scene model has it: "
+                            f"{args.sensor} has none)")
+        opts["mount_in_background"] = bool(args.mount_in_background)
+    return opts
+
+
 def _nlos_scene(args):
     """The DENALI or corner scene from the options given."""
     from nlosplan.simulators import corner_scene, denali_scene
@@ -143,11 +165,8 @@ def _nlos_scene(args):
     common = _given(args, reflectance="reflectance", albedo="object_albedo", lobe_fwhm_deg="lobe_deg",
                     diffuse_albedo="diffuse_albedo")
     if args.scene == "denali":
-        if args.mount_in_signal and not args.mount:
-            raise UserError("--mount-in-signal needs --mount (it says where the mount is)")
-        extra = {"mount_in_background": False} if args.mount_in_signal else {}
-        return denali_scene(**_given(args, obj="object", size="size", position="position", mount="mount"),
-                            lights=args.lights, **common, **extra)
+        return denali_scene(**_given(args, obj="object", size="size", position="position"), lights=args.lights,
+                            **_denali_options(args, common))
     xy = {} if args.object_xy is None else {"object_xy": _parse_xy(args.object_xy)}
     return corner_scene(**_given(args, wall_distance="wall_distance", object="object", object_size="object_size",
                                  yaw_deg="object_yaw"), **xy, lights_on=args.lights == "on", **common)
@@ -413,7 +432,11 @@ def _simulate_wall(args, sensor, out, legacy, plot) -> int:
 
 def _cmd_simulate(args) -> int:
     """``nlosplan simulate``: check the options and outputs, build the sensor, run the scene."""
+    from nlosplan.simulators.presets.scene_model import DEFAULT_SENSOR
+
     _check_scene_options(args)
+    if args.sensor is None:  # DENALI's calibrated unit on its rig; the datasheet's generic unit elsewhere
+        args.sensor = DEFAULT_SENSOR if args.scene == "denali" else GENERIC_SENSOR
     out, legacy, plot = _outputs(args)
     sensor = _sensor_from_args(args)
     if args.scene == "wall":
@@ -465,10 +488,15 @@ def add(sub) -> None:
     add = _scene_options(sim.add_argument_group("DENALI rig (--scene denali)"), ("denali",), only)
     add("--size", choices=["4in", "8in"], help="object size (default: 8in)")
     add("--position", type=int, metavar="N", help="gantry position, 0 to 99 (default: 19)")
-    add("--mount", action="store_true", help="add the object mount and its plate (Lambertian 0.8); they stay in "
-                                             "the background capture (DENALI's NOOBJECT), so they cancel from the signal")
-    add("--mount-in-signal", action="store_true", help="with --mount: a background without the mount (DENALI's "
-                                                       "NOOBJECTMOUNT), so the mount's return is in the signal")
+    add("--mount", action="store_true", help="add the object mount and its plate (Lambertian 0.8); unless the "
+                                             "sensor's scene model places them, they stay in the background capture "
+                                             "(DENALI's NOOBJECT), so they cancel from the signal")
+    add("--no-mount", action="store_true", help="leave the mount out (the default sensor's scene model has it)")
+    add("--mount-in-signal", action="store_true", help="a background without the mount (DENALI's NOOBJECTMOUNT), so "
+                                                       "the mount's return is in the signal (the default sensor's "
+                                                       "scene model)")
+    add("--mount-in-background", action="store_true", help="the mount stays in the background capture, so it "
+                                                           "cancels from the signal")
 
     add = _scene_options(sim.add_argument_group("corner (--scene corner)"), ("corner",), only)
     add("--wall-distance", type=float, metavar="M", help="LiDAR to relay wall, metres (default: 0.5)")
@@ -484,10 +512,12 @@ def add(sub) -> None:
                          "corner: patch (default), a DENALI name like A_8in, or an .obj file")
     add("--reflectance", choices=["retroreflective", "lambertian"],
         help="object reflectance (default: retroreflective for denali, lambertian for corner)")
-    add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: 0.5)")
+    add("--object-albedo", type=float, metavar="A", help="object albedo, 0..1 (default: the sensor's scene model, "
+                                                         "0.367 for denali-tmf8828-*; else 0.5)")
     add("--lobe-deg", type=float, metavar="DEG", help="retroreflective lobe FWHM, degrees (default: 2)")
-    add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A", help="Lambertian base of a retroreflective object, 0..1, with "
-                                                          "object albedo + diffuse albedo <= 1 (default: 0)")
+    add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A",
+        help="Lambertian base of a retroreflective object, 0..1, with object albedo + diffuse albedo <= 1 "
+             "(default: the sensor's scene model, 0.2 for denali-tmf8828-*; else 0)")
     add("--backend", choices=["fast", "mitsuba"],
         help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
              "cuda_ad_rgb; e.g. --backend mitsuba --fidelity low takes ~10 s on 2 cores)")
@@ -507,7 +537,10 @@ def add(sub) -> None:
     add("--samples", type=int, metavar="N", help="sub-rays per zone axis, the wall's fidelity knob (default: 4)")
 
     sen = sim.add_argument_group("sensor (all scenes)")
-    sen.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
+    sen.add_argument("--sensor", default=None,
+                     help="preset name or sensor file (default: denali-tmf8828-3x3 for --scene denali, DENALI's unit "
+                          "calibrated on the real Table 2, whose scene model sets the object's albedo, diffuse base "
+                          f"and mount; {GENERIC_SENSOR} for corner and wall)")
     sen.add_argument("--jitter-ps", type=number_type(float, zero_ok=True), metavar="J",
                      help="override timing jitter FWHM, ps (>= 0)")
     sen.add_argument("--bins", type=int_type(1, MAX_BINS), metavar="N", help=f"override number of bins (1 to {MAX_BINS})")

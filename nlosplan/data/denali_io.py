@@ -163,7 +163,7 @@ def _count_error(path: Path, values: np.ndarray, bad: np.ndarray, why: str) -> U
 def _sensors(sensors) -> dict[str, SensorConfig]:
     from nlosplan.sensor_models import preset
 
-    out = {"3x3": preset("tmf8828-3x3-short"), "8x8": preset("tmf8828-8x8-short")}
+    out = {"3x3": preset("denali-tmf8828-3x3"), "8x8": preset("denali-tmf8828-8x8")}  # DENALI's own unit
     for s in sensors or ():
         if not isinstance(s, SensorConfig):
             raise UserError(f"sensors must be SensorConfig objects, not {type(s).__name__}")
@@ -208,8 +208,8 @@ def import_denali(root, store, *, positions_json=None, trust_pickle: bool = Fals
     trust_pickle : bool
         Allow capture files that need pickle (they may run code when loaded).
     sensors : sequence of SensorConfig, optional
-        Sensors by zone mode, replacing the presets ``tmf8828-3x3-short`` and
-        ``tmf8828-8x8-short`` (their bin width becomes the dataset's).
+        Sensors by zone mode, replacing the presets of DENALI's unit ``denali-tmf8828-3x3`` and
+        ``denali-tmf8828-8x8`` (their bin width becomes the dataset's).
     source : str
         ``source`` label of the captures.
     progress : callable, optional

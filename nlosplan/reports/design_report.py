@@ -134,7 +134,9 @@ def minimum_hardware_text(summary: dict, ref_bin_ps: float | None = None) -> str
     a = answer_table(summary).drop(columns=["why"])
     why = "\n".join(f"  {c['requirement']}: {c['verdict']}: {c['decision']}" for c in summary["cheapest"])
     r = requirements_table(summary)
-    return (format_table(a.to_dict("records")) + "\n" + why + "\n\nminimum requirement per parameter (others at the "
+    model = summary.get("world_model")
+    world = f"\nsimulated world: sensor {model['sensor']}; scenes: {model['scene']}" if model else ""
+    return (format_table(a.to_dict("records")) + "\n" + why + world + "\n\nminimum requirement per parameter (others at the "
             f"reference {summary['reference_sensor']}):\n" + format_table(r.to_dict("records"))
             + "\n\nloc_rmse: " + summary["metric_definitions"]["loc_rmse"])
 
@@ -190,7 +192,9 @@ def _headline(summary: dict, ref_bin_ps: float | None = None) -> str:
             parts.append(f"**{c['requirement']}**: undecided: {c['decision']}")
         else:
             parts.append(f"**{c['requirement']}**: not met: {c['decision']}")
-    return "; ".join(parts) + "."
+    model = summary.get("world_model")
+    where = (f" Simulated world: sensor {model['sensor']}, scenes with {model['scene']}." if model else "")
+    return "; ".join(parts) + "." + where
 
 
 def _slug(req: str) -> str:

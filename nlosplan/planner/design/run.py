@@ -408,8 +408,13 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     finally:
         executor.close()
         ckpt.close()
+    from nlosplan.simulators.presets.scene_model import describe_scene_options
+
     result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=result.pop("_refs"),
-                  stability=stability, checkpoint=str(out / CHECKPOINT))
+                  stability=stability, checkpoint=str(out / CHECKPOINT),
+                  world_model={"sensor": cfg.space.reference, "scene_model": cfg.scenes.model or None,
+                               "scene_options": cfg.scenes.options(),
+                               "scene": describe_scene_options(cfg.scenes.options())})
     return result
 
 
