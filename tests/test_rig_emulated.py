@@ -52,14 +52,17 @@ def test_emulated_histograms_follow_the_gantry_to_any_position(tmp_path):
     from nlosplan.simulators.presets.denali import scene_at
     from nlosplan.sensor_models import preset
     from nlosplan.simulators import expected_histogram
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
 
     points = [(17.5, 203.25), (250.0, 40.0)]
     with emulated_rig(time_scale=50) as rig, CaptureStore(tmp_path / "r.db") as store:
         Executor(rig, store, run_id="off", context=CTX).run(positions_plan(points, repeats=8, settle_s=0.0))
-        sensor = preset("tmf8828-3x3-short")
+        sensor = preset("denali-tmf8828-3x3")  # the emulator's model: DENALI's unit and its fitted scene
+        opts = scene_options(scene_model(sensor))
+        assert opts["mount"] and not opts["mount_in_background"]
         for k, (x, y) in enumerate(points):
             ds = store.load(position=-1, capture_id=[f"off/{k * 8 + r:06d}" for r in range(8)])
-            mean = expected_histogram(scene_at("A", "8in", x, y), sensor, fidelity="draft")
+            mean = expected_histogram(scene_at("A", "8in", x, y, **opts), sensor, fidelity="draft")
             got = ds.histograms.mean(axis=0)
             # late bins hold the object's three-bounce light: compare where the expectation has counts
             z = (mean.sum(axis=(0, 1)) / mean.sum()).argmax()

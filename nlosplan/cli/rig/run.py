@@ -128,8 +128,11 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
 
     # the capture planner's counts model is linear and alike in every zone: the preset without its pile-up and
     # per-zone calibration terms (those serve the realism checks, 'nlosplan bench real')
-    sensor = sensor_preset(args.zones, args.range_mode).linear_uniform()
-    scene_fn = denali_scene_fn(args.object, args.size, "off")
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
+
+    model = sensor_preset(args.zones, args.range_mode)
+    sensor = model.linear_uniform()
+    scene_fn = denali_scene_fn(args.object, args.size, "off", **scene_options(scene_model(model)))
     (x0, x1), (y0, y1) = args.limits
     cand = screen_candidates(grid_points(args.grid, args.grid, (x0, x1), (y0, y1)), limits=args.limits,
                              scene_fn=scene_fn, sensor=sensor)

@@ -33,11 +33,15 @@ __all__ = ["CALIBRATION_PARAMETERS", "CandidateSpace", "build_space", "denali_sc
 CALIBRATION_PARAMETERS = ("dx_m", "dy_m", "log_photon_scale", "log_albedo")
 
 
-def denali_scene_fn(obj: str = "A", size: str = "8in", lights: str = "off"):
-    """``scene_fn(x_mm, y_mm)`` for the DENALI rig (:func:`nlosplan.simulators.presets.denali.scene_at`)."""
+def denali_scene_fn(obj: str = "A", size: str = "8in", lights: str = "off", **scene_kw):
+    """``scene_fn(x_mm, y_mm)`` for the DENALI rig (:func:`nlosplan.simulators.presets.denali.scene_at`).
+
+    ``scene_kw``: further :func:`~nlosplan.simulators.denali_scene` keywords (a calibrated sensor's scene model,
+    :func:`~nlosplan.simulators.presets.scene_model.scene_options`).
+    """
     from nlosplan.simulators import scene_at
 
-    return lambda x_mm, y_mm: scene_at(obj, size, x_mm, y_mm, lights)
+    return lambda x_mm, y_mm: scene_at(obj, size, x_mm, y_mm, lights, **scene_kw)
 
 
 def _labels(scenes) -> np.ndarray:
