@@ -277,3 +277,25 @@ def test_variant_refits_widen_the_photon_scale_interval():
     from nlosplan.sensor_models.uncertainty import validate_uncertainty
 
     assert validate_uncertainty(u)["parameters"]["photon_scale"]["std"] == pytest.approx(with_["photon_scale"]["std"])
+
+
+@pytest.mark.slow
+def test_calibrate_stats_cli_variants_widen_the_shipped_kind_of_uncertainty(tmp_path):
+    import json
+
+    def run(*extra):
+        out = tmp_path / f"d{len(extra)}.toml"
+        r = subprocess.run([sys.executable, "-m", "nlosplan", "calibrate", "--stats", "denali-table2", "--positions",
+                            "1", "--fit", "photon_scale,dark_rate_hz,albedo", "--bootstrap", "5", *extra, "--out",
+                            str(out), "--json"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout), json.loads(out.with_name(out.stem + ".uncertainty.json").read_text())
+
+    (plain, u0), (varied, u1) = run(), run("--variants")
+    assert plain["variants"] == [] and len(varied["variants"]) == 80 and len(u1["samples"]) == 85
+    v = varied["variants"][0]
+    assert set(v) == {"repeats", "levels", "diffuse_albedo", "mount_in_background", "objective", "converged", "values"}
+    p0, p1 = u0["parameters"]["photon_scale"], u1["parameters"]["photon_scale"]
+    # at 30 scenes the bootstrap's Monte-Carlo spread is ~1 %; the level readings alone move the photon scale 3-5 %
+    assert p1["std"] > 1.5 * p0["std"] and p1["hi"] - p1["lo"] > 0.07 * p1["value"]
+    assert varied["intervals"]["diffuse_albedo"]["lo"] == 0.0 and "diffuse_albedo" not in plain["intervals"]
