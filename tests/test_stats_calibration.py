@@ -244,3 +244,58 @@ def test_8x8_preset_takes_the_early_residual_per_iteration():
     _, n8, _ = scene_for("denali-tmf8828-8x8", s8)
     assert n8["early_residual_counts"] == pytest.approx(n3["early_residual_counts"] / 1000)
     assert n8["background_offset_on"] == n3["background_offset_on"]
+
+
+def test_variant_refits_widen_the_photon_scale_interval():
+    from nlosplan.calibration.stats_fit import bootstrap, intervals, uncertainty_dict
+    from nlosplan.calibration.stats_variants import MODEL_VARIANTS, Variant, variant_fits, variant_samples
+
+    assert len(MODEL_VARIANTS) == 80 and {v.repeats for v in MODEL_VARIANTS} == {"mean", "single"}
+    assert {v.diffuse_albedo for v in MODEL_VARIANTS} == {0.0, 0.1, 0.2, 0.3}
+    comp = _toy_components()
+    sensor = preset("denali-tmf8828-3x3")
+    st = _model_made_stats(comp, sensor)
+    sensor = sensor.replace(photon_scale=TRUE["photon_scale"], dark_rate_hz=TRUE["dark_rate_hz"])
+    fit = fit_stats(st, comp, sensor, SCENE | NUIS | {"albedo": TRUE["albedo"]}, FREE, seed=7, maxeval=200)
+    boot = bootstrap(st, comp, sensor, fit, 5, seed=7, maxeval=100)
+    chosen = (Variant("mean", "mean count -3 %", 0.0, False), Variant("mean", "mean count +3 %", 0.0, False),
+              Variant("single", "log1p +0.03", 0.3, True))
+    refits = variant_fits(st, comp, sensor, fit, chosen, seed=7, maxeval=100)
+    ps = fit.values["photon_scale"]
+    # the checkpoint level pins the photon scale: read 3 % low / high, it moves 2-6 % down / up
+    assert 0.94 * ps < refits[0].values["photon_scale"] < 0.98 * ps
+    assert 1.02 * ps < refits[1].values["photon_scale"] < 1.06 * ps
+    assert refits[2].values["diffuse_albedo"] == 0.3 and refits[2].values["mount_in_background"] is True
+    without, with_ = intervals(fit, boot), intervals(fit, boot + variant_samples(fit, refits))
+    assert with_["photon_scale"]["std"] > 3 * without["photon_scale"]["std"]
+    assert with_["photon_scale"]["hi"] - with_["photon_scale"]["lo"] > 0.04 * ps
+    assert "diffuse_albedo" not in without
+    d = with_["diffuse_albedo"]  # fixed by each variant: 0, 0, 0.3 (the 97.5 % point of three lies below 0.3)
+    assert d["value"] == 0.0 and d["lo"] == 0.0 and 0.25 < d["hi"] <= 0.3 and d["std"] == pytest.approx(0.3 / 3**0.5)
+    u = uncertainty_dict("denali-tmf8828-3x3", fit, boot + variant_samples(fit, refits))
+    assert set(u["parameters"]) == {"photon_scale", "dark_rate_hz"} and len(u["samples"]) == 8
+    from nlosplan.sensor_models.uncertainty import validate_uncertainty
+
+    assert validate_uncertainty(u)["parameters"]["photon_scale"]["std"] == pytest.approx(with_["photon_scale"]["std"])
+
+
+@pytest.mark.slow
+def test_calibrate_stats_cli_variants_widen_the_shipped_kind_of_uncertainty(tmp_path):
+    import json
+
+    def run(*extra):
+        out = tmp_path / f"d{len(extra)}.toml"
+        r = subprocess.run([sys.executable, "-m", "nlosplan", "calibrate", "--stats", "denali-table2", "--positions",
+                            "1", "--fit", "photon_scale,dark_rate_hz,albedo", "--bootstrap", "5", *extra, "--out",
+                            str(out), "--json"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout), json.loads(out.with_name(out.stem + ".uncertainty.json").read_text())
+
+    (plain, u0), (varied, u1) = run(), run("--variants")
+    assert plain["variants"] == [] and len(varied["variants"]) == 80 and len(u1["samples"]) == 85
+    v = varied["variants"][0]
+    assert set(v) == {"repeats", "levels", "diffuse_albedo", "mount_in_background", "objective", "converged", "values"}
+    p0, p1 = u0["parameters"]["photon_scale"], u1["parameters"]["photon_scale"]
+    # at 30 scenes the bootstrap's Monte-Carlo spread is ~1 %; the level readings alone move the photon scale 3-5 %
+    assert p1["std"] > 1.5 * p0["std"] and p1["hi"] - p1["lo"] > 0.07 * p1["value"]
+    assert varied["intervals"]["diffuse_albedo"]["lo"] == 0.0 and "diffuse_albedo" not in plain["intervals"]

@@ -185,43 +185,22 @@ def bootstrap(stats: StatsFile, comp, sensor, fit: StatsFit, n: int, *, seed: in
     return out
 
 
-#: Model variants ``calibrate --stats --variants`` refits under (findings §3-§5: what Table 2 cannot decide):
-#: the object's diffuse base and whether the mount is in the background capture.
-MODEL_VARIANTS = tuple({"diffuse_albedo": d, "mount_in_background": m} for d in (0.0, 0.1, 0.2, 0.3)
-                       for m in (False, True))
-
-
-def variant_fits(stats: StatsFile, comp, sensor, fit: StatsFit, *, seed: int = 0, maxeval: int = 150,
-                 progress=None) -> list[StatsFit]:
-    """Refits of ``fit``'s free parameters under each of :data:`MODEL_VARIANTS` (same data, same noise seed).
-
-    Their spread is the model's own uncertainty, which the SEMs' bootstrap does not see; their objectives say
-    how much the data prefer one variant.
-    """
-    out = []
-    start = {k: v for k, v in fit.values.items() if k not in SENSOR_PARAMS}
-    base = sensor.replace(**{k: float(fit.values[k]) for k in SENSOR_PARAMS})
-    for i, var in enumerate(MODEL_VARIANTS):
-        v0 = start | var
-        if "albedo" in fit.free:
-            v0["albedo"] = min(v0["albedo"], 1.0 - var["diffuse_albedo"])
-        out.append(fit_stats(stats, comp, base, v0, fit.free, seed=seed, maxeval=maxeval))
-        if progress is not None:
-            progress(i + 1, len(MODEL_VARIANTS))
-    return out
-
-
 def intervals(fit: StatsFit, samples: list[dict]) -> dict:
-    """Per fitted name: value, std (of the refits), lo and hi (their 2.5 and 97.5 % points, widened to hold the value).
+    """Per fitted name, and per other name that at least two samples hold (a scene parameter the model variants
+    fix, :mod:`.stats_variants`): value, std (of the refits), lo and hi (their 2.5 and 97.5 % points, widened to
+    hold the value).
 
     Empty without at least two refits: a single fit carries no spread.
     """
     if len(samples) < 2:
         return {}
+    extra = sorted({k for s in samples for k in s} - set(fit.free))
     out = {}
-    for k in fit.free:
+    for k in tuple(fit.free) + tuple(extra):
         v = float(fit.values[k])
-        xs = np.array([s[k] for s in samples], float)
+        xs = np.array([s[k] for s in samples if k in s], float)
+        if len(xs) < 2:
+            continue
         out[k] = {"value": v, "std": float(xs.std(ddof=1)), "lo": min(v, float(np.percentile(xs, 2.5))),
                   "hi": max(v, float(np.percentile(xs, 97.5)))}
     return out

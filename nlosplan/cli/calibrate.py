@@ -296,8 +296,9 @@ def add(sub) -> None:
     p.add_argument("--fit", metavar="NAME,...",
                    help="--stats: parameters to fit (default: photon_scale, dark_rate_hz, albedo and the nuisances)")
     p.add_argument("--variants", action="store_true",
-                   help="--stats: also refit under the model variants Table 2 cannot decide (object diffuse base "
-                        "0-0.3, mount in or out of the background); their spread joins the uncertainty")
+                   help="--stats: also refit under the 80 model variants Table 2 cannot decide (repeat-mean or "
+                        "single captures, the checkpoint levels read 3 %% low or high, object diffuse base 0-0.3, "
+                        "mount in or out of the background); their spread joins the uncertainty")
     p.add_argument("--positions", type=int_type(1, 100), metavar="N",
                    help="--stats/--score of a statistics file: gantry positions per object simulated (default: 10; "
                         "fewer are a coarser sample of the gantry grid)")

@@ -31,8 +31,8 @@ def run_stats(args, t0: float) -> int:
     from nlosplan.calibration.bootstrap import MIN_RESAMPLES
     from nlosplan.calibration.stats_file import load_stats
     from nlosplan.files import check_output_file, write_text
-    from nlosplan.calibration.stats_fit import (MODEL_VARIANTS, bootstrap, fit_stats, intervals, split,
-                                                uncertainty_dict, variant_fits)
+    from nlosplan.calibration.stats_fit import bootstrap, fit_stats, intervals, split, uncertainty_dict
+    from nlosplan.calibration.stats_variants import MODEL_VARIANTS, variant_fits, variant_samples, variant_summary
     from nlosplan.calibration.stats_model import SENSOR_PARAMS, components
     from nlosplan.calibration.stats_score import scene_for, scene_table_path, scene_table_toml, score_stats
     from nlosplan.reports.realism_table import format_table2
@@ -76,7 +76,7 @@ def run_stats(args, t0: float) -> int:
         with progress_bar(args, len(MODEL_VARIANTS), "model variants", "refit") as bar:
             variants = variant_fits(stats, comp, sensor, fit, seed=args.seed,
                                     progress=None if bar is None else (lambda done, total: bar.update(1)))
-        samples = samples + [{k: float(r.values[k]) for k in fit.free} for r in variants]
+        samples = samples + variant_samples(fit, variants)
     fitted, fscene, fnuis = split(fit.values, sensor)
     fscene["mount"] = bool(scene.get("mount", True))
     res = score_stats(stats, fitted, fscene, fnuis, comp=comp)
@@ -87,7 +87,8 @@ def run_stats(args, t0: float) -> int:
         parts.append(f"{args.bootstrap} bootstrap refits (the statistics redrawn within their SEMs, a new noise seed "
                      "each; scene sample and model held fixed)")
     if variants:
-        parts.append(f"{len(variants)} model-variant refits (diffuse base 0-0.3 x mount in/out of the background)")
+        parts.append(f"{len(variants)} model-variant refits (repeat-mean or single captures x 5 readings of the "
+                     "checkpoint levels x diffuse base 0-0.3 x mount in/out of the background)")
     method = "spread of " + " and ".join(parts) if parts else "none (no --bootstrap, no --variants)"
     files = {}
     if args.out:
@@ -111,20 +112,19 @@ def run_stats(args, t0: float) -> int:
     data = {"sensor": sensor.name, "statistics": str(args.stats), "fit": {
         "values": fit.values, "free": list(fit.free), "objective": fit.objective, "converged": fit.converged,
         "evaluations": fit.evaluations, "seconds": fit.seconds, "message": fit.message},
-        "variants": [{**{k: r.values[k] for k in ("diffuse_albedo", "mount_in_background")},
-                      "objective": r.objective, "converged": r.converged} for r in variants],
+        "variants": [{**v.as_dict(), "objective": r.objective, "converged": r.converged,
+                      "values": {k: r.values[k] for k in fit.free}} for v, r in zip(MODEL_VARIANTS, variants)],
         "uncertainty": unc, "intervals": iv, "uncertainty_method": method, "score": res, "files": files, "seconds": time.perf_counter() - t0}
     lines = [f"fitted {', '.join(fit.free)} of {sensor.name} to {args.stats} ({30 * args.positions} scenes per size, "
              f"noise seed {args.seed}): objective {fit.objective:.4g} after {fit.evaluations} evaluations"
              + ("" if fit.converged else f"; NOT converged: {fit.message}")]
-    for k in fit.free:
+    for k in tuple(fit.free) + tuple(k for k in iv if k not in fit.free):
         p = iv.get(k)
         err = "" if p is None else f" +- {p['std']:.3g} (95 % {p['lo']:.4g} to {p['hi']:.4g})"
         lines.append(f"  {k:26s} {fit.values[k]:.5g}{err}")
     lines.append(f"uncertainty: {method}")
-    for r in variants:
-        lines.append(f"  variant diffuse_albedo {r.values['diffuse_albedo']:g}, mount in background "
-                     f"{str(bool(r.values['mount_in_background'])).lower()}: objective {r.objective:.4g}")
+    if variants:
+        lines += variant_summary(variants)
     lines.append(format_table2(res))
     lines += [f"wrote {k}: {v}" for k, v in files.items()]
     emit(args, data, "\n".join(lines))

@@ -59,13 +59,16 @@ def denali_nuisances(zones: str) -> dict:
 
 
 #: Intervals of the fitted scene parameters and nuisances, (value, std, lo, hi): the spread of 40 bootstrap refits
-#: within the SEMs and 8 model-variant refits (diffuse base 0-0.3 x mount in/out of the background).
+#: within the SEMs and 80 model-variant refits (:mod:`nlosplan.calibration.stats_variants`: repeat-mean or single
+#: captures x 5 readings of the checkpoint levels x diffuse base 0-0.3 x mount in/out of the background).
+#: ``diffuse_albedo`` is not fitted: each variant fixes it (0, 0.1, 0.2, 0.3), so its interval is that range.
 DENALI_SCENE_INTERVALS: dict = {
-    "albedo": (0.3667, 0.0127, 0.3564, 0.4068),
-    "background_offset_on": (0.02349, 0.00052, 0.02229, 0.02436),
-    "background_offset_off": (-0.00695, 0.00035, -0.00759, -0.00640),
-    "early_residual_counts": (48.76, 3.71, 43.87, 56.84),
-    "early_residual_decay_bins": (2.716, 0.419, 2.032, 3.494),
+    "albedo": (0.3667, 0.0462, 0.3532, 0.4909),
+    "diffuse_albedo": (0.2, 0.113, 0.0, 0.3),
+    "background_offset_on": (0.02349, 0.0129, 0.02275, 0.05143),
+    "background_offset_off": (-0.00695, 0.0065, -0.00809, 0.00732),
+    "early_residual_counts": (48.76, 16.5, 44.67, 93.44),
+    "early_residual_decay_bins": (2.716, 0.701, 1.0, 3.367),
 }
 #: The diffuse base's range where no interval above gives one: the model variants Table 2 cannot decide (0-0.3).
 DENALI_DIFFUSE_RANGE = (0.0, 0.3)
@@ -77,11 +80,13 @@ DENALI_PROVENANCE = (
     "lights-on extra (ambient_rate_hz): fitted by 'nlosplan calibrate --stats' on DENALI Table 2 "
     "(calibration/data/denali_table2.toml) with the checkpoint levels. {scores}"
 )
-#: Scores of the fit ('nlosplan calibrate --stats denali-table2 --bootstrap 40', 300 scenes per size, 3 noise seeds).
+#: Scores of the fit ('nlosplan calibrate --stats denali-table2 --bootstrap 40 --variants', 300 scenes per size,
+#: 3 noise seeds).
 DENALI_SCORES = (
     "Fit: objective 35.6, converged; Table 2 (3x3): 13 of 16 row statistics and 4 of 4 ratios within target; "
     "missed: centroids of on-4in (+1.2 bins), on-8in (-1.8) and off-8in (-1.4). Sensor-field intervals: "
-    "data/denali-tmf8828-3x3.uncertainty.json (40 bootstrap refits within the SEMs + 8 model-variant refits: "
-    "+-0.2 % photon scale, +-0.3 % floor; the research's wider variant set gave +-8 % photon scale). "
+    "data/denali-tmf8828-3x3.uncertainty.json (40 bootstrap refits within the SEMs + 80 model-variant refits: "
+    "repeat-mean or single captures, checkpoint levels read 3 % low or high, diffuse base 0-0.3, mount in or out "
+    "of the background): photon scale +-2.2 % (95 % -4.3 to +4.8 %), floor +-1.9 % (-4.3 to +3.6 %). "
     "See docs/calibration.md."
 )
