@@ -63,6 +63,9 @@ def test_sensor_list_json_names_all_presets(capsys):
     names = [r["name"] for r in json.loads(out)["presets"]]
     assert names == ["tmf8828-3x3-short", "tmf8828-3x3-plane-unit", "denali-tmf8828-3x3", "denali-tmf8828-8x8",
                      "tmf8828-4x4-short", "tmf8828-8x8-short", "tmf8828-3x3-long", "vl53l8ch-8x8"]
+    data = json.loads(out)
+    assert data["default"] == "denali-tmf8828-3x3"
+    assert [r["name"] for r in data["presets"] if r["scene"] == "fitted"] == ["denali-tmf8828-3x3", "denali-tmf8828-8x8"]
 
 
 def test_simulate_writes_npy_and_png(capsys, tmp_path):

@@ -21,6 +21,7 @@ def _provenance(name: str) -> str:
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.sensor_models import PRESET_NAMES, preset
+    from nlosplan.simulators.presets.scene_model import CALIBRATED_SCENE_MODELS, DEFAULT_SENSOR
 
     rows = []
     for name in PRESET_NAMES:
@@ -28,8 +29,11 @@ def _cmd_sensor_list(args) -> int:
         rows.append(dict(name=name, zones=f"{s.zones_rows}x{s.zones_cols}", bins=s.n_bins,
                          bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
                          pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
-                         iterations=s.iterations, provenance=_provenance(name)))
-    emit(args, {"presets": rows}, format_table(rows))
+                         iterations=s.iterations, provenance=_provenance(name),
+                         scene="fitted" if name in CALIBRATED_SCENE_MODELS else "defaults"))
+    note = (f"default: {DEFAULT_SENSOR} (design, dataset build, simulate --scene denali, rig emulators); "
+            "scene 'fitted': its DENALI scenes take the retro albedo, diffuse base and mount it was fitted with")
+    emit(args, {"presets": rows, "default": DEFAULT_SENSOR}, format_table(rows) + "\n" + note)
     return 0
 
 
