@@ -114,6 +114,11 @@ class FastSimulator:
         How arrivals are added onto the node grid (:data:`~nlosplan.sensor_models.transient.DEPOSIT_METHODS`):
         one windowed scatter-add (default) or the two scalar ones of before issue 20 (``bench simulate
         --baseline``); equal up to float summation order.
+    cache_chunks : bool
+        Build each chunk's parameters once, on the host, and reuse them in every call (default). ``False``
+        is the path of before issue 20: every call gathers each chunk's parameters leaf by leaf on the
+        device (about 0.4 ms per leaf on this CPU, so 3-10 ms for one scene), kept for ``bench simulate
+        --baseline``. The results are identical.
 
     Examples
     --------
@@ -125,7 +130,8 @@ class FastSimulator:
     """
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
-                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window"):
+                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window",
+                 cache_chunks: bool = True):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -143,6 +149,9 @@ class FastSimulator:
         self.chunk = max(1, int(chunk))
         self._arrays = to_jax(self.plan.arrays, self.dtype)
         self._params = None
+        self.cache_chunks = bool(cache_chunks)
+        self._chunks = None
+        self._sensor_p = None
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
@@ -183,17 +192,44 @@ class FastSimulator:
             self._params = to_jax(scene_p, self.dtype), to_jax(sensor_p, self.dtype)
         return self._params
 
-    def _run(self, parts: bool):
-        scene_p, sensor_p = self._jax_params()
+    def _chunk_index(self) -> list[tuple[np.ndarray, int]]:
+        """Scene indices of each compiled call, shape ``(chunk,)`` (the last one padded with its last scene), and the count kept."""
         n = len(self.scenes)
+        if n <= self.chunk:
+            return [(np.arange(n), n)]
+        return [(np.arange(start, start + self.chunk).clip(max=min(start + self.chunk, n) - 1),
+                 min(self.chunk, n - start)) for start in range(0, n, self.chunk)]
+
+    def _chunk_params(self) -> list[tuple[dict, int]]:
+        """Each chunk's scene parameters as JAX arrays with the number of its scenes kept, built once.
+
+        The chunks are sliced on the host (NumPy) before the transfer: slicing the device arrays costs
+        one gather dispatch per leaf and chunk on every call.
+        """
+        if self._chunks is None:
+            scene_np, _ = self.params()
+            self._chunks = [(to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype), keep)
+                            for idx, keep in self._chunk_index()]
+        return self._chunks
+
+    def _run(self, parts: bool):
+        if self.cache_chunks:
+            sensor_p = self._sensor_params()
+            chunks = self._chunk_params()
+        else:  # before issue 20: the chunks gathered from the device arrays on every call
+            scene_p, sensor_p = self._jax_params()
+            chunks = [(jax.tree_util.tree_map(lambda a: a[idx], scene_p), keep) for idx, keep in self._chunk_index()]
         outs = []
-        for start in range(0, n, self.chunk):
-            stop = min(start + self.chunk, n)
-            idx = np.arange(start, start + self.chunk).clip(max=stop - 1) if n > self.chunk else np.arange(start, stop)
-            chunk_p = jax.tree_util.tree_map(lambda a: a[idx], scene_p)
+        for chunk_p, keep in chunks:
             out = _BATCHED(self.plan.static, self._arrays, chunk_p, sensor_p, parts)
-            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, : stop - start], out))
+            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, :keep], out))
         return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *outs)
+
+    def _sensor_params(self) -> dict:
+        """The sensors' dynamic fields as JAX arrays, leading axis (S,), built once."""
+        if self._sensor_p is None:
+            self._sensor_p = to_jax(_stack([sensor_params(s) for s in self.sensors]), self.dtype)
+        return self._sensor_p
 
     def _shape(self, a: np.ndarray) -> np.ndarray:
         """(S, N, Z, B) -> drop single batch axes; zones -> (rows, cols) when all are output."""
