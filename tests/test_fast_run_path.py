@@ -1,4 +1,4 @@
-"""The batched run path: chunk parameters built once on the host (issue 20) equal the per-call device slices of before."""
+"""The batched run path of issue 20 (chunk parameters built once on the host, sensor terms computed once) equals the per-call path of before."""
 
 import numpy as np
 import pytest
@@ -19,8 +19,8 @@ def test_cached_chunks_equal_per_call_slices_with_a_padded_last_chunk(options):
     old = FastSimulator(scenes, sensors=sensors, fidelity="draft", chunk=2, cache_chunks=False)
     a, b = new.expected(parts=True), old.expected(parts=True)
     assert a["counts"].shape == (2, 5, 3, 3, 128)
-    for part in ("counts", "object", "direct", "background"):
-        np.testing.assert_array_equal(a[part], b[part], err_msg=part)
+    for part in ("counts", "object", "direct", "background"):  # two compilations: float32 rounding apart
+        assert np.abs(a[part] - b[part]).max() <= 1e-6 * np.abs(b[part]).max(), part
     assert np.abs(a["object"]).max() > 0
     # every scene of a chunk is its own: the scene simulated alone (its own plan: the retroreflector's
     # within float32 round-off; the Lambertian terms' cells and grids are the batch's union, within 0.3 %)
@@ -38,7 +38,7 @@ def test_cached_chunks_equal_per_call_slices_with_a_padded_last_chunk(options):
 def test_single_scene_call_reuses_its_parameters():
     sim = FastSimulator(denali_scene("A", "8in", 5), resolve_sensor("tmf8828-3x3-short"), fidelity="draft")
     first = sim.expected()
-    chunks = sim._chunks
-    assert first.shape == (3, 3, 128) and len(chunks) == 1
+    chunks, terms = sim._chunks, sim._sensor_terms
+    assert first.shape == (3, 3, 128) and len(chunks) == 1 and terms["irf"].shape[0] == 1
     np.testing.assert_array_equal(sim.expected(), first)
-    assert sim._chunks is chunks
+    assert sim._chunks is chunks and sim._sensor_terms is terms
