@@ -89,15 +89,15 @@ def test_scene_models_are_timed_and_scored_in_the_same_run(run):
     assert bench.MODEL_OPTIONS["mixed+mount"] == {**bench.MODEL_OPTIONS["mixed"], "mount": True,
                                                   "mount_in_background": False}
     assert "model mixed (albedo=0.36, diffuse_albedo=0.2; draft, batched)" in run[1]
-    # --baseline: the deposit of before issue 20 timed beside the current one, same results within float32 rounding
+    # --baseline: the path of before issue 20 timed beside the current one, same results within float32 rounding
     for r in rows.values():
         b = r["baseline"]
-        assert b["deposit"] == "scatter" and b["scenes_per_second"] > 0 and b["single_call_ms"] > 0
+        assert b["deposit"] == "scatter" and b["cache_chunks"] is False and b["scenes_per_second"] > 0 and b["single_call_ms"] > 0
         assert r["single_call_ms"] > 0 and r["speed_ratio_vs_baseline"] == pytest.approx(
             b["scenes_per_second"] and r["scenes_per_second"] / b["scenes_per_second"])
         assert b["max_rel_diff_vs_new"] < 1e-5
         assert b["rel_l1_error"] == pytest.approx(r["rel_l1_error"], rel=1e-3, abs=1e-6)
-    assert run[1].count("vs the deposit before issue 20 (scatter, same run)") == len(MODELS)
+    assert run[1].count("vs the path before issue 20 (scatter deposit, chunks gathered per call, same run)") == len(MODELS)
 
 
 def test_unknown_scene_model_is_rejected():

@@ -90,7 +90,8 @@ def _model_lines(rows: list) -> list[str]:
                    f"{r['centroid_shift_bins']:.3g} bins")
         b = r.get("baseline")
         if b:
-            out.append(f"  vs the deposit before issue 20 ({b['deposit']}, same run): {b['scenes_per_second']:.4g} "
+            out.append(f"  vs the path before issue 20 ({b['deposit']} deposit, chunks gathered per call, same run): "
+                       f"{b['scenes_per_second']:.4g} "
                        f"scenes/s (new x{r['speed_ratio_vs_baseline']:.2f}), single call {r['single_call_ms']:.3g} ms "
                        f"vs {b['single_call_ms']:.3g} ms (x{r['single_call_ratio_vs_baseline']:.2f}), rel L1 "
                        f"{_pct(r['rel_l1_error'])} vs {_pct(b['rel_l1_error'])}, new vs old max rel diff "

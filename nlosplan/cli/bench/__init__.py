@@ -105,8 +105,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--plot", nargs="?", const=DEFAULT_PLOT, default=None, metavar="PATH",
                         help=f"also plot error against run time: {DEFAULT_PLOT}, or PATH (.png, .pdf, .svg, ...)")
     parser.add_argument("--baseline", action="store_true",
-                        help="also time each scene model with the deposit of before issue 20 (two scalar "
-                             "scatter-adds) beside the current one in the same run; prints the ratios")
+                        help="also time each scene model with the path of before issue 20 (two scalar "
+                             "scatter-adds, chunk parameters gathered on every call) beside the current one in "
+                             "the same run; prints the ratios")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser
 

@@ -62,6 +62,9 @@ TARGET_REL_L1 = 0.01
 TARGET_SCENES_PER_SECOND = 200.0
 #: Stretch target (histograms per second).
 STRETCH_SCENES_PER_SECOND = 1000.0
+#: ``FastSimulator`` options of the path before issue 20, timed beside the current one by ``--baseline``:
+#: two scalar scatter-adds, and each chunk's parameters gathered from the device arrays on every call.
+BASELINE_PATH = {"deposit": "scatter", "cache_chunks": False}
 #: Default levels, reference positions and plot path.
 DEFAULT_LEVELS = ("draft", "low", "default", "high")
 #: A mixed batch: five objects of every class (letters, shapes, digits) and both sizes; the reference
@@ -199,7 +202,7 @@ def bench_simulate(
         Each figure keeps calling for at least this long (the fastest call is
         kept), so that a busy machine has quiet moments to show.
     baseline : bool
-        Also time each scene model with the deposit of before issue 20 (``deposit="scatter"``) beside
+        Also time each scene model with the path of before issue 20 (:data:`BASELINE_PATH`) beside
         the current one, in the same process: ``models[i]["baseline"]`` and ``speed_ratio_vs_baseline``.
     models : sequence of str
         Scene models (:data:`MODEL_OPTIONS`) timed back to back at
@@ -400,23 +403,28 @@ def _models(models, objects, sizes, positions, index, reference_positions, retro
 
 def _against_baseline(scenes, sim, best, got, ref, index, reference_positions, sensor, level, dtype, repeats,
                       min_seconds, say, name) -> dict:
-    """The deposit of before issue 20 (``deposit="scatter"``) timed after the current one, and both single-call."""
-    say(f"models ({level}): {name}, baseline deposit (scatter)")
-    old = FastSimulator(scenes, sensor, fidelity=level, dtype=dtype, deposit="scatter")
+    """The path of before issue 20 timed after the current one, and both single-call.
+
+    The old path: two scalar scatter-adds (``deposit="scatter"``) and every call gathering each chunk's
+    parameters from the device arrays (``cache_chunks=False``). The current path is ``sim``'s.
+    """
+    say(f"models ({level}): {name}, baseline (scatter deposit, chunks gathered per call)")
+    old = FastSimulator(scenes, sensor, fidelity=level, dtype=dtype, **BASELINE_PATH)
     _, old_best = _warm_and_time(old, repeats, min_seconds)
     old_obj = old.expected(parts=True)["object"]
     old_got = {p: old_obj[index[p]] for p in reference_positions}
+    new_path = {"deposit": sim.plan.static.deposit, "cache_chunks": sim.cache_chunks}
     single = {}
-    for method in ("window", "scatter"):
-        one = FastSimulator(scenes[0], sensor, fidelity=level, dtype=dtype, deposit=method)
-        single[method] = _warm_and_time(one, max(repeats, 5), min_seconds)[1]
+    for key, path in (("new", new_path), ("old", BASELINE_PATH)):
+        one = FastSimulator(scenes[0], sensor, fidelity=level, dtype=dtype, **path)
+        single[key] = _warm_and_time(one, max(repeats, 5), min_seconds)[1]
     old_err = errors(old_got, ref)
-    return {"single_call_ms": 1e3 * single["window"],
-            "baseline": {"deposit": "scatter", "scenes_per_second": len(scenes) / old_best,
-                         "single_call_ms": 1e3 * single["scatter"], "rel_l1_error": old_err["rel_l1_error"],
+    return {"single_call_ms": 1e3 * single["new"],
+            "baseline": {**BASELINE_PATH, "scenes_per_second": len(scenes) / old_best,
+                         "single_call_ms": 1e3 * single["old"], "rel_l1_error": old_err["rel_l1_error"],
                          "max_rel_diff_vs_new": max_rel_diff(np.stack([got[p] for p in reference_positions]),
                                                             np.stack([old_got[p] for p in reference_positions]))},
-            "speed_ratio_vs_baseline": old_best / best, "single_call_ratio_vs_baseline": single["scatter"] / single["window"]}
+            "speed_ratio_vs_baseline": old_best / best, "single_call_ratio_vs_baseline": single["old"] / single["new"]}
 
 
 def _pruning(objects, sizes, positions, sensor, level, dtype, repeats, min_seconds, say) -> tuple[dict, FastSimulator]:

@@ -43,6 +43,26 @@ def _batched(static, arrays, scene_p, sensor_p, parts):
 _BATCHED = jax.jit(_batched, static_argnums=(0, 4))
 
 
+def _sensor_terms(static, arrays, sensor_p):
+    """:func:`~nlosplan.simulators.fast.transport.sensor_terms` of every sensor, leading axis (S,)."""
+    with deposit_method(static.deposit):
+        return jax.lax.map(lambda sp: sensor_terms(static, arrays, sp), sensor_p)
+
+
+def _batched_terms(static, arrays, scene_p, terms, parts):
+    """As :func:`_batched`, with the sensors' terms computed beforehand (:func:`_sensor_terms`).
+
+    A simulator computes its sensors' terms once and reuses them in every call: a one-scene call then
+    computes only the scene's objects.
+    """
+    with deposit_method(static.deposit):
+        return jax.lax.map(lambda t: jax.lax.map(lambda sc: scene_counts(static, arrays, sc, t, parts), scene_p), terms)
+
+
+_TERMS = jax.jit(_sensor_terms, static_argnums=(0,))
+_BATCHED_TERMS = jax.jit(_batched_terms, static_argnums=(0, 4))
+
+
 def sensor_params(sensor: SensorConfig) -> dict:
     """The dynamic (traceable) fields of a sensor as floats."""
     return {k: float(getattr(sensor, k)) for k in DYNAMIC_SENSOR_FIELDS}
@@ -114,6 +134,12 @@ class FastSimulator:
         How arrivals are added onto the node grid (:data:`~nlosplan.sensor_models.transient.DEPOSIT_METHODS`):
         one windowed scatter-add (default) or the two scalar ones of before issue 20 (``bench simulate
         --baseline``); equal up to float summation order.
+    cache_chunks : bool
+        Build each chunk's parameters once, on the host, and the sensors' terms (impulse-response matrix,
+        first bounce, crosstalk) once, and reuse them in every call (default). ``False`` is the path of
+        before issue 20: every call gathers each chunk's parameters leaf by leaf on the device (about
+        0.4 ms per leaf on this CPU, so 3-10 ms for one scene) and recomputes the sensors' terms, kept for
+        ``bench simulate --baseline``. Equal within float32 rounding.
 
     Examples
     --------
@@ -125,7 +151,8 @@ class FastSimulator:
     """
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
-                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window"):
+                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window",
+                 cache_chunks: bool = True):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -143,6 +170,9 @@ class FastSimulator:
         self.chunk = max(1, int(chunk))
         self._arrays = to_jax(self.plan.arrays, self.dtype)
         self._params = None
+        self.cache_chunks = bool(cache_chunks)
+        self._chunks = None
+        self._sensor_terms = None
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
@@ -183,17 +213,48 @@ class FastSimulator:
             self._params = to_jax(scene_p, self.dtype), to_jax(sensor_p, self.dtype)
         return self._params
 
-    def _run(self, parts: bool):
-        scene_p, sensor_p = self._jax_params()
+    def _chunk_index(self) -> list[tuple[np.ndarray, int]]:
+        """Scene indices of each compiled call, shape ``(chunk,)`` (the last one padded with its last scene), and the count kept."""
         n = len(self.scenes)
+        if n <= self.chunk:
+            return [(np.arange(n), n)]
+        return [(np.arange(start, start + self.chunk).clip(max=min(start + self.chunk, n) - 1),
+                 min(self.chunk, n - start)) for start in range(0, n, self.chunk)]
+
+    def _chunk_params(self) -> list[tuple[dict, int]]:
+        """Each chunk's scene parameters as JAX arrays with the number of its scenes kept, built once.
+
+        The chunks are sliced on the host (NumPy) before the transfer: slicing the device arrays costs
+        one gather dispatch per leaf and chunk on every call.
+        """
+        if self._chunks is None:
+            scene_np, _ = self.params()
+            self._chunks = [(to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype), keep)
+                            for idx, keep in self._chunk_index()]
+        return self._chunks
+
+    def _run(self, parts: bool):
+        static = self.plan.static
+        if self.cache_chunks:
+            terms = self._terms()
+            chunks = self._chunk_params()
+            run = lambda chunk_p: _BATCHED_TERMS(static, self._arrays, chunk_p, terms, parts)  # noqa: E731
+        else:  # before issue 20: the chunks gathered from the device arrays and the sensor terms, every call
+            scene_p, sensor_p = self._jax_params()
+            chunks = [(jax.tree_util.tree_map(lambda a: a[idx], scene_p), keep) for idx, keep in self._chunk_index()]
+            run = lambda chunk_p: _BATCHED(static, self._arrays, chunk_p, sensor_p, parts)  # noqa: E731
         outs = []
-        for start in range(0, n, self.chunk):
-            stop = min(start + self.chunk, n)
-            idx = np.arange(start, start + self.chunk).clip(max=stop - 1) if n > self.chunk else np.arange(start, stop)
-            chunk_p = jax.tree_util.tree_map(lambda a: a[idx], scene_p)
-            out = _BATCHED(self.plan.static, self._arrays, chunk_p, sensor_p, parts)
-            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, : stop - start], out))
+        for chunk_p, keep in chunks:
+            out = run(chunk_p)
+            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, :keep], out))
         return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *outs)
+
+    def _terms(self) -> dict:
+        """The sensors' terms (:func:`~nlosplan.simulators.fast.transport.sensor_terms`), leading axis (S,), computed once."""
+        if self._sensor_terms is None:
+            sensor_p = to_jax(_stack([sensor_params(s) for s in self.sensors]), self.dtype)
+            self._sensor_terms = _TERMS(self.plan.static, self._arrays, sensor_p)
+        return self._sensor_terms
 
     def _shape(self, a: np.ndarray) -> np.ndarray:
         """(S, N, Z, B) -> drop single batch axes; zones -> (rows, cols) when all are output."""

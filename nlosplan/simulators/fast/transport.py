@@ -241,45 +241,50 @@ def zone_nodes(static, arrays, nodes, bw, t0, overlap: bool = True):
     return apply_zone_terms(nodes, grid.node_times(bw, t0), bw / grid.oversample, overlap=overlap, **arrays["zone"])
 
 
+def to_bins(static, terms: dict, nodes):
+    """Node transients ``(Z, n_nodes)`` binned through the sensor's impulse response: ``(Z, n_bins)``."""
+    if static.irf == "none":
+        return bin_nodes_without_irf(static.grid, nodes)
+    return nodes @ terms["irf"]
+
+
 def sensor_terms(static, arrays, sensor_p) -> dict:
     """What a sensor adds independently of the hidden objects (shared by every scene of a batch).
 
     Returns
     -------
-    dict
-        ``sp`` (the sensor fields as arrays), ``to_bins`` (node -> bin map
-        of the impulse response), ``direct`` and ``crosstalk`` (photons per
-        iteration per bin, ``(Z, n_bins)``; the direct part already scaled by
-        the photon scale).
+    dict of arrays
+        ``sp`` (the sensor fields as arrays), ``irf`` (the node -> bin matrix of the impulse response,
+        ``(n_nodes, n_bins)``, absent when there is none: see :func:`to_bins`), ``direct`` and
+        ``crosstalk`` (photons per iteration per bin, ``(Z, n_bins)``; the direct part already scaled by
+        the photon scale). Arrays only, so a batch can compute them once and pass them in.
     """
     grid = static.grid
     dtype = arrays["direct_w"].dtype
     sp = {k: jnp.asarray(v, dtype) for k, v in sensor_p.items()}
     bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
     z = static.n_zones
-    if static.irf == "none":
-        to_bins = lambda nodes: bin_nodes_without_irf(grid, nodes)  # noqa: E731
-    else:
+    out = {"sp": sp}
+    if static.irf != "none":
         sigma = impulse_sigma_ps(sp["pulse_fwhm_ps"], sp["jitter_fwhm_ps"]) if static.irf == "full" else jnp.zeros((), dtype)
         pulse = None
         if static.pulse is not None:
             pulse = (jnp.asarray(static.pulse[0], dtype), static.pulse[1], jnp.asarray(static.pulse[2], dtype))
-        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=sigma, pulse=pulse, extent_ps=static.extent,
-                         nominal_bin_width_ps=static.nominal_bin_width)
-        to_bins = lambda nodes: nodes @ mat  # noqa: E731
+        out["irf"] = irf_matrix(grid, bin_width_ps=bw, sigma_ps=sigma, pulse=pulse, extent_ps=static.extent,
+                                nominal_bin_width_ps=static.nominal_bin_width)
     zero = jnp.zeros((z, static.grid.n_bins), dtype)
     direct = xt = zero
     if static.direct:
         nodes = deposit(grid, arrays["direct_path"] / C_M_PER_PS, arrays["direct_w"], arrays["direct_row"], z,
                         bin_width_ps=bw, start_offset_ps=t0)
         direct_nodes = sp["photon_scale"] * zone_nodes(static, arrays, nodes, bw, t0)
-        direct = to_bins(direct_nodes)
+        direct = to_bins(static, out, direct_nodes)
     if static.crosstalk:
         nodes = deposit(grid, jnp.zeros((z,), dtype), jnp.broadcast_to(sp["crosstalk"], (z,)), jnp.arange(z), z,
                         bin_width_ps=bw, start_offset_ps=t0)
         xt_nodes = zone_nodes(static, arrays, nodes, bw, t0, overlap=False)
-        xt = to_bins(xt_nodes)
-    out = {"sp": sp, "to_bins": to_bins, "direct": direct, "crosstalk": xt}
+        xt = to_bins(static, out, xt_nodes)
+    out.update(direct=direct, crosstalk=xt)
     if static.walk_ps:  # the time walk depends on each scene's total light: keep the unbinned nodes
         zero_nodes = jnp.zeros((z, grid.n_nodes), dtype)
         out["direct_nodes"] = direct_nodes if static.direct else zero_nodes
@@ -289,7 +294,7 @@ def sensor_terms(static, arrays, sensor_p) -> dict:
 
 def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
     """Expected counts of one scene given its sensor's :func:`sensor_terms` (see :func:`forward`)."""
-    sp, to_bins = terms["sp"], terms["to_bins"]
+    sp = terms["sp"]
     dtype = arrays["direct_w"].dtype
     bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
     if static.walk_ps:
@@ -298,8 +303,8 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
         direct, xt = terms["direct"], terms["crosstalk"]
         obj = jnp.zeros_like(terms["direct"])
         if static.objects:
-            obj = sp["photon_scale"] * to_bins(zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
-                                                          bw, t0))
+            obj = sp["photon_scale"] * to_bins(static, terms, zone_nodes(
+                static, arrays, object_nodes(static, arrays, scene_p, bw, t0), bw, t0))
     lam = direct + obj + xt
     rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
         sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
@@ -317,7 +322,7 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
 
 def _walked(static, arrays, scene_p, terms, bw, t0):
     """Direct, object and crosstalk photons per bin after the time walk of each zone's total light."""
-    sp, to_bins = terms["sp"], terms["to_bins"]
+    sp = terms["sp"]
     parts = [terms["direct_nodes"], jnp.zeros_like(terms["direct_nodes"]), terms["crosstalk_nodes"]]
     if static.objects:
         parts[1] = sp["photon_scale"] * zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
@@ -325,7 +330,7 @@ def _walked(static, arrays, scene_p, terms, bw, t0):
     times = static.grid.node_times(bw, t0)
     shift = walk_shift_ps(sum(window_light(p, times, t0, bw * static.grid.n_bins) for p in parts), static.walk_ps)
     delta = bw / static.grid.oversample
-    return tuple(to_bins(move_nodes(p, times, delta, offsets_ps=shift)) for p in parts)
+    return tuple(to_bins(static, terms, move_nodes(p, times, delta, offsets_ps=shift)) for p in parts)
 
 
 def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
