@@ -42,3 +42,6 @@ def test_incompatible_batches_are_refused():
         FastSimulator([denali_scene(), corner_scene(reflectance="retroreflective")], S3)
     with pytest.raises(UserError, match="may differ only in"):
         FastSimulator(denali_scene(), None, sensors=[S3, S3.replace(n_bins=64)])
+    for field, value in (("bin_width_ps", 1.05 * S3.bin_width_ps), ("start_offset_ps", S3.start_offset_ps + 50.0)):
+        with pytest.raises(UserError, match=f"share their time base; {field} differs"):
+            FastSimulator(denali_scene(), None, sensors=[S3, S3.replace(**{field: value})])
