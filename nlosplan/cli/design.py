@@ -21,9 +21,11 @@ With no options: the DENALI rig and DENALI's TMF8828 as calibrated on the real T
 per bin; [space] reference in --config picks another sensor), the three
 tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
 size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
-32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 13 minutes on
-2 idle cores; --quick runs a reduced space in about 3 minutes (references are cached by content:
-a second run with the same sensor model and scenes does not simulate them again).
+32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 40 minutes the
+first time on 2 shared cores (the calibrated scene's mount and diffuse base are costly to
+simulate), about 10 with its references cached; --quick runs a reduced space (about 7
+minutes the first time). References are cached by content: a second run with the same
+sensor model and scenes does not simulate them again.
 
 Metrics: loc_rmse is DENALI's localization RMSE, metres: sqrt of the mean of the squared
 x and y errors pooled over the N x 2 entries (loc<=X means loc_rmse <= X); top1_acc is
@@ -180,7 +182,7 @@ def add(sub) -> None:
                    "the least hardware per NLOS task on the DENALI rig: search, verify, report (the main job)",
                    description=DESCRIPTION)
     p.add_argument("--quick", action="store_true",
-                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects, 4 worlds): about 3 "
+                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects, 4 worlds): about 7 "
                         "minutes")
     p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
                                                      "(see nlosplan/planner/design/config.py for the tables)")
