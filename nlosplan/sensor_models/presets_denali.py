@@ -70,8 +70,6 @@ DENALI_SCENE_INTERVALS: dict = {
     "early_residual_counts": (48.76, 16.5, 44.67, 93.44),
     "early_residual_decay_bins": (2.716, 0.701, 1.0, 3.367),
 }
-#: The diffuse base's range where no interval above gives one: the model variants Table 2 cannot decide (0-0.3).
-DENALI_DIFFUSE_RANGE = (0.0, 0.3)
 #: Provenance shown by ``nlosplan sensor show`` / ``sensor list``.
 DENALI_PROVENANCE = (
     "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6): facts of DENALI's capture code; zones, "

@@ -162,13 +162,11 @@ def default_ranges(lights: str = "off", model: str = "") -> tuple[WorldRange, ..
     blur beyond the measured pulse stays a declared range.
     """
     if model:
-        from nlosplan.sensor_models.presets_denali import DENALI_SCENE_INTERVALS, DENALI_DIFFUSE_RANGE
+        from nlosplan.sensor_models.presets_denali import DENALI_SCENE_INTERVALS
 
         scene = set(scene_parameters())
         ranges = [WorldRange(n, float(iv[2]), float(iv[3])) for n, iv in sorted(DENALI_SCENE_INTERVALS.items())
                   if n in scene and iv[2] < iv[3]]
-        if "diffuse_albedo" in scene and "diffuse_albedo" not in DENALI_SCENE_INTERVALS:
-            ranges.append(WorldRange("diffuse_albedo", *DENALI_DIFFUSE_RANGE))
         return tuple(ranges) + (WorldRange("jitter_fwhm_ps", 0.0, 150.0),)
     ranges = [WorldRange("albedo", 0.3, 0.7)]
     if "diffuse_albedo" in scene_parameters():
