@@ -64,21 +64,36 @@ def test_second_run_takes_the_references_from_the_cache(counted, tmp_path):
 
 
 def test_damaged_entry_is_recomputed_with_a_note(counted, tmp_path):
-    cfg = tiny()
-    run_design(cfg, tmp_path / "a", workers=1)
-    n = len(counted)
-    entry = sorted(reference_cache.cache_dir().glob("*.npz"))[0]
+    """The run's reference step (``run._simulate``) on one small layout: stored, damaged, recomputed, trusted again."""
+    from nlosplan.planner.design.executors import SerialExecutor
+    from nlosplan.planner.design.jobs import ReferenceJob
+    from nlosplan.planner.design.run import _simulate
+    from nlosplan.sensor_models.presets import preset
+
+    sensor = preset("tmf8828-3x3-short").replace(zones_rows=1, zones_cols=1)
+    scenes = SceneSet(objects=("A",), positions=(0, 50), repeats=1, crlb_objects=(), fidelity="draft")
+    notes = []
+
+    def step(folder):
+        path = tmp_path / folder / "1x1.npz"
+        path.parent.mkdir()
+        _simulate(SerialExecutor(), [ReferenceJob(str(path), sensor, scenes, "1x1")],
+                  lambda text, *a: notes.append(text), "references")
+        return load_reference(path).means
+
+    first = step("a")
+    assert len(counted) == 1 and first.shape == (2 * 2, 1, 1, 128) and first.sum() > 0
+    (entry,) = sorted(reference_cache.cache_dir().glob("*.npz"))
     raw = bytearray(entry.read_bytes())
     raw[len(raw) // 2] ^= 0xFF
     entry.write_bytes(bytes(raw))
-    notes = []
-    run_design(cfg, tmp_path / "b", workers=1, progress=lambda text, *a: notes.append(text))
-    assert len(counted) == n + 1
+    again = step("b")
+    assert len(counted) == 2
     assert any("damaged" in n and "checksum" in n for n in notes), notes
-    np.testing.assert_array_equal(_means(tmp_path / "a"), _means(tmp_path / "b"))
+    np.testing.assert_array_equal(first, again)
     # the recomputed entry is valid again: a third run takes it
-    run_design(cfg, tmp_path / "c", workers=1)
-    assert len(counted) == n + 1
+    np.testing.assert_array_equal(step("c"), first)
+    assert len(counted) == 2
 
 
 def test_key_changes_with_sensor_scenes_and_code(monkeypatch):
