@@ -10,7 +10,13 @@ from nlosplan.cli import main
 PLANE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "tmf882x_distance" / "distance_data_even.json"
 
 
-def test_missing_plane_data_is_one_line(tmp_path, capsys):
+def test_missing_plane_data_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
+    from nlosplan.cli.bench import real as bench_real
+
+    def no_work(*a, **k):
+        raise AssertionError("the Table-2 part ran before the inputs were checked")
+
+    monkeypatch.setattr(bench_real, "run_table2", no_work)
     assert main(["bench", "real", "--plane", str(tmp_path / "none.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert "plane captures not found at" in err and "give --plane PATH" in err and len(err.splitlines()) == 1

@@ -13,7 +13,13 @@ from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, DesignConfig, read_evaluations, run_design
 from nlosplan.planner.design.search import SearchConfig
 from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.worlds import WorldsConfig
 from nlosplan.reports.design_report import write_design_report
+
+
+#: The planner's mechanics are tested on the datasheet unit's plain scenes (no mount: half the reference time);
+#: the default (DENALI-calibrated) world is the main job's and the config tests'.
+GENERIC = "tmf8828-3x3-short"
 
 
 def tiny_config() -> DesignConfig:
@@ -21,11 +27,11 @@ def tiny_config() -> DesignConfig:
     fid["bound"]["draws"] = 60
     fid["trained"].update(epochs=4, bootstrap=50)
     return DesignConfig(
-        space=DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2), axes=("zones", "jitter_fwhm_ps")),
+        space=DesignSpace(reference=GENERIC, zones=((1, 1), (3, 3)), bin_factors=(1, 2), axes=("zones", "jitter_fwhm_ps")),
         search=SearchConfig(grid_points=3, refine_steps=1, seeds=1, candidates=1, optimize_evals=4, fidelity=fid),
         scenes=SceneSet(objects=("A", "S", "circle"), positions=tuple(range(0, 100, 10)), repeats=1,
                         crlb_objects=("A",), crlb_stride=5, fidelity="draft"),
-        label="quick")
+        worlds=WorldsConfig(count=2, candidates=1), label="quick")
 
 
 def evaluations(out) -> list[dict]:

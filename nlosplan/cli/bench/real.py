@@ -28,8 +28,7 @@ def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=Non
     from nlosplan.calibration.plane_scores import TARGETS, tables_dict
     from nlosplan.calibration.tmf882x_fit import load_distance_captures
 
-    if not Path(path).is_file():
-        raise UserError(f"plane captures not found at {path}; give --plane PATH (the tmf882x_distance JSON)")
+    _check_plane(path)
     base = resolve_sensor(sensor)
     caps = load_distance_captures(path)
     cv = cross_validate(caps, plane_arrivals(base), base, folds=folds, min_distance_m=min_distance_m,
@@ -45,6 +44,11 @@ def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=Non
 
 
 PARTS = ("plane", "table2")
+
+
+def _check_plane(path) -> None:
+    if not Path(path).is_file():
+        raise UserError(f"plane captures not found at {path}; give --plane PATH (the tmf882x_distance JSON)")
 
 
 def run_table2(stats_path: str, sensor: str, n_positions: int, scene_file=None) -> dict:
@@ -78,7 +82,13 @@ def _parts(text: str) -> list[str]:
 def _cmd(args) -> int:
     from nlosplan.reports.realism_table import format_plane_table, format_table2
 
+    from nlosplan.calibration.stats_file import load_stats
+
     parts = _parts(args.parts)
+    if "plane" in parts:   # every input is checked before the first (minute-long) part runs
+        _check_plane(args.plane)
+    if "table2" in parts:
+        load_stats(args.stats)
     out, texts = {}, []
     if "table2" in parts:
         t2 = run_table2(args.stats, args.denali_sensor, args.positions)
