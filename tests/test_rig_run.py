@@ -12,9 +12,11 @@ ARGS = ["rig", "run", "--emulate", "--planner", "active", "--budget", "4", "--ba
 
 
 def test_closed_loop_with_approval_runs_the_approved_batch_and_stops_at_a_refusal(tmp_path, monkeypatch, capsys):
+    """The approval gate (on the datasheet unit's long range: plain scenes, a third of the time; the slow resume test
+    runs the default DENALI-calibrated model)."""
     monkeypatch.setattr("sys.stdin", io.StringIO("y\nn\n"))
     out = tmp_path / "out"
-    code = main(ARGS + ["--approve", "--store", str(tmp_path / "loop.db"), "--out", str(out), "--json"])
+    code = main(ARGS + ["--range", "long", "--approve", "--store", str(tmp_path / "loop.db"), "--out", str(out), "--json"])
     cap = capsys.readouterr()
     assert code == 0, cap.err
     res = json.loads(cap.out)
