@@ -14,11 +14,12 @@ MODELS = ("mlp", "cnn1d", "cnn3d", "transformer")
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    """6 objects (two per class group) x 2 sizes x 8 positions x 2 repeats at draft fidelity (192 captures)."""
+    """6 objects (two per class group) x 2 sizes x 8 positions x 2 repeats at draft fidelity (192 captures), on the
+    datasheet unit's plain scenes (a third of the DENALI-calibrated default's time; test_cli_dataset covers that)."""
     path = tmp_path_factory.mktemp("e2e") / "small.sqlite"
     assert main(["dataset", "build", "--store", str(path), "--objects", "1,7,A,S,circle,plus",
                  "--positions", "0,3,9,33,66,90,96,99", "--repeats", "2",
-                 "--fidelity", "draft", "--json"]) == 0
+                 "--fidelity", "draft", "--sensor", "tmf8828-3x3-short", "--json"]) == 0
     return path
 
 
