@@ -130,8 +130,8 @@ class GrblFirmware(PtyDevice):
         for tid in os.listdir(f"/proc/{self.proc.pid}/task"):
             try:
                 os.sched_setaffinity(int(tid), {core})
-            except ProcessLookupError:
-                pass
+            except ProcessLookupError:   # that thread ended between the listing and now: nothing to pin
+                continue
 
     def on_bytes(self, data: bytes) -> None:
         if self._fw >= 0:

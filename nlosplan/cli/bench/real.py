@@ -80,15 +80,14 @@ def _parts(text: str) -> list[str]:
 
 
 def _cmd(args) -> int:
-    from nlosplan.reports.realism_table import format_plane_table, format_table2
-
     from nlosplan.calibration.stats_file import load_stats
+    from nlosplan.reports.realism_table import format_plane_table, format_table2
 
     parts = _parts(args.parts)
     if "plane" in parts:   # every input is checked before the first (minute-long) part runs
         _check_plane(args.plane)
     if "table2" in parts:
-        load_stats(args.stats)
+        load_stats(args.stats)   # a small file, read again by the part: its errors are one line before any work
     out, texts = {}, []
     if "table2" in parts:
         t2 = run_table2(args.stats, args.denali_sensor, args.positions)
