@@ -339,6 +339,22 @@ def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = Non
     sel = mesh.face_areas > 0
     if face_mask is not None:
         sel &= np.asarray(face_mask, dtype=bool)
+    key = (mesh.content_key, n, sel.tobytes(), int(oversample), int(iterations), int(max_cells))
+    if key not in _QUADRATURES:  # deterministic: every plan of a mesh (layouts, worlds, batches) reuses it
+        if len(_QUADRATURES) >= _QUADRATURE_CACHE_SIZE:
+            _QUADRATURES.pop(next(iter(_QUADRATURES)))
+        _QUADRATURES[key] = _quadrature(mesh, n, sel, oversample, iterations, max_cells)
+    return _QUADRATURES[key]
+
+
+#: Surface quadratures computed in this process, by mesh content, point count, faces and knobs (oldest dropped).
+_QUADRATURES: dict = {}
+_QUADRATURE_CACHE_SIZE = 1024
+
+
+def _quadrature(mesh: Mesh, n: int, sel: np.ndarray, oversample: int, iterations: int,
+                max_cells: int) -> SurfaceSamples:
+    """:func:`surface_quadrature` on the faces ``sel`` (its arrays read-only: the result is shared)."""
     total = float(mesh.face_areas[sel].sum())
     if n == 0 or total <= 0:
         return _empty()
@@ -364,8 +380,10 @@ def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = Non
             nrm.append(nr / np.linalg.norm(nr))
             wts.append(w.sum())
             idx.append(face[nearest])
-    return SurfaceSamples(points=np.array(pts), normals=np.array(nrm), areas=np.array(wts),
-                          face_index=np.array(idx, dtype=np.int64))
+    out = [np.array(pts), np.array(nrm), np.array(wts), np.array(idx, dtype=np.int64)]
+    for a in out:
+        a.setflags(write=False)
+    return SurfaceSamples(points=out[0], normals=out[1], areas=out[2], face_index=out[3])
 
 
 def _lloyd(points: np.ndarray, weights: np.ndarray, k: int, iterations: int) -> list[np.ndarray]:

@@ -12,6 +12,8 @@ raises :class:`~nlosplan.errors.UserError` with one line naming the bad value.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -282,24 +284,30 @@ class Mesh:
         object.__setattr__(self, "vertices", _readonly(v))
         object.__setattr__(self, "faces", _readonly(f.astype(np.int64)))
 
-    @property
+    # the mesh is immutable (read-only arrays): derived arrays are computed once, read-only too
+    @functools.cached_property
     def triangles(self) -> np.ndarray:
         """Vertex positions per face, shape (F, 3, 3)."""
-        return self.vertices[self.faces]
+        return _readonly(self.vertices[self.faces])
 
-    @property
+    @functools.cached_property
     def face_areas(self) -> np.ndarray:
         """Area of each face, shape (F,), m^2 (0 for degenerate faces)."""
         t = self.triangles
-        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+        return _readonly(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1))
 
-    @property
+    @functools.cached_property
     def face_normals(self) -> np.ndarray:
         """Unit outward normal of each face, shape (F, 3); zero for degenerate faces."""
         t = self.triangles
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         norm = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0)
+        return _readonly(np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0))
+
+    @functools.cached_property
+    def content_key(self) -> str:
+        """A digest of the vertices and faces (what derived data such as a surface quadrature is cached by)."""
+        return hashlib.sha1(self.vertices.tobytes() + b"|" + self.faces.tobytes()).hexdigest()
 
     @property
     def area(self) -> float:

@@ -262,14 +262,24 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
     labels = _scene_labels(scenes.objects, scenes.sizes, scenes.positions, scenes.lights)
     kw = scenes.options()
     means = []
-    for obj in scenes.objects:  # one object at a time: bounded memory, a progress step each
-        batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw) for s in scenes.sizes for p in scenes.positions]
-        if scenes.backend == "mitsuba":
+    if scenes.backend == "mitsuba":
+        for obj in scenes.objects:  # one object at a time, a progress step each
+            batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw) for s in scenes.sizes for p in scenes.positions]
             means.append(np.stack([_twin_expected(sc, sensor, scenes.fidelity) for sc in batch]).astype(np.float32))
-        else:
-            means.append(np.asarray(FastSimulator(batch, sensor, fidelity=scenes.fidelity).expected(), np.float32))
+            if progress:
+                progress(f"{sensor.zones_rows}x{sensor.zones_cols} {obj}")
+    else:
+        # every object in one batch: one plan and one compiled simulator for all of them (a batch per object
+        # compiled again for each object's padding sizes), and a gantry mount the same under every object at a
+        # position is simulated once per position (FastSimulator's ``share``), not once per object and size
+        batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw)
+                 for obj in scenes.objects for s in scenes.sizes for p in scenes.positions]
+        step = None
         if progress:
-            progress(f"{sensor.zones_rows}x{sensor.zones_cols} {obj}")
+            step = lambda done, total: progress(  # noqa: E731
+                f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
+        means.append(np.asarray(FastSimulator(batch, sensor, fidelity=scenes.fidelity).expected(progress=step),
+                                np.float32))
     if not scenes.crlb_objects:
         return ReferenceData(sensor, labels, means=np.concatenate(means), source=scenes.backend,
                              seconds=time.perf_counter() - t0)

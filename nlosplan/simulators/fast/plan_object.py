@@ -93,21 +93,17 @@ def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
     mesh = obj_list[0].mesh
     tri, fn, fa = mesh.triangles, mesh.face_normals, mesh.face_areas
     corners = scene.wall.corners()
-    vis = np.zeros(len(fa), bool)
-    seen = set()
-    for obj in obj_list:
-        key = obj.to_world.tobytes()
-        if key in seen:
-            continue
-        seen.add(key)
-        r, t = obj.to_world[:3, :3], obj.to_world[:3, 3]
-        tw = tri @ r.T + t
-        nw = fn @ r.T
-        cen = tw.mean(axis=1)
-        sees = np.einsum("fk,fck->fc", nw, corners[None] - cen[:, None]).max(axis=1) > 0
-        front = np.max(scene.wall.signed_distance(tw), axis=1) > 0
-        vis |= sees & front
-    return vis & (fa > 0)
+    poses = np.unique(np.stack([np.asarray(o.to_world, np.float64) for o in obj_list]), axis=0)  # (P, 4, 4)
+    r, t = poses[:, :3, :3], poses[:, :3, 3]
+    n_w, w0 = scene.wall.normal, scene.wall.center
+    # every pose at once: a face sees the wall when some corner is in front of it, and is in front of the wall
+    rt = r.transpose(0, 2, 1)
+    cen = tri.mean(axis=1)[None] @ rt + t[:, None]  # (P, F, 3) face centres in the world
+    nw = fn[None] @ rt  # (P, F, 3) world normals
+    sees = (nw @ corners.T - np.sum(nw * cen, axis=-1, keepdims=True)).max(axis=2) > 0  # (P, F)
+    height = (n_w @ r) @ tri.reshape(-1, 3).T + ((t - w0) @ n_w)[:, None]  # (P, 3F) vertex heights over the wall
+    front = height.reshape(len(poses), -1, 3).max(axis=2) > 0
+    return np.any(sees & front, axis=0) & (fa > 0)
 
 
 def _by_mesh(obj_list: list[HiddenObject]) -> tuple[list[list[HiddenObject]], np.ndarray]:

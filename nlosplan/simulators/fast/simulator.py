@@ -17,7 +17,7 @@ from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
 from nlosplan.sensor_models.transient import DEPOSIT_METHODS, deposit_method
-from nlosplan.simulators.fast.transport import forward, scene_counts, sensor_terms
+from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms
 from nlosplan.simulators.scene import Scene
 
 _FORWARD = jax.jit(forward, static_argnums=(0, 4))
@@ -59,8 +59,31 @@ def _batched_terms(static, arrays, scene_p, terms, parts):
         return jax.lax.map(lambda t: jax.lax.map(lambda sc: scene_counts(static, arrays, sc, t, parts), scene_p), terms)
 
 
+def _shared_nodes(static, arrays, scene_p, terms, only):
+    """The object terms ``only`` of every scene under every sensor on the node grid: (S, N, Z, n_nodes)."""
+    def per_sensor(t):
+        bw, t0 = t["sp"]["bin_width_ps"], t["sp"]["start_offset_ps"]
+        return jax.lax.map(lambda sc: object_nodes(static, arrays, sc, bw, t0, terms=only), scene_p)
+
+    with deposit_method(static.deposit):
+        return jax.lax.map(per_sensor, terms)
+
+
+def _batched_shared(static, arrays, scene_p, terms, parts, only, nodes):
+    """As :func:`_batched_terms`, with the object terms ``only`` given as nodes (S, N, Z, n_nodes) (:func:`_shared_nodes`)."""
+    def per_sensor(tn):
+        t, n = tn
+        return jax.lax.map(lambda sn: scene_counts(static, arrays, sn[0], t, parts, shared=(only, sn[1])),
+                           (scene_p, n))
+
+    with deposit_method(static.deposit):
+        return jax.lax.map(per_sensor, (terms, nodes))
+
+
 _TERMS = jax.jit(_sensor_terms, static_argnums=(0,))
 _BATCHED_TERMS = jax.jit(_batched_terms, static_argnums=(0, 4))
+_SHARED = jax.jit(_shared_nodes, static_argnums=(0, 4))
+_BATCHED_SHARED = jax.jit(_batched_shared, static_argnums=(0, 4, 5))
 
 
 def sensor_params(sensor: SensorConfig) -> dict:
@@ -140,6 +163,12 @@ class FastSimulator:
         before issue 20: every call gathers each chunk's parameters leaf by leaf on the device (about
         0.4 ms per leaf on this CPU, so 3-10 ms for one scene) and recomputes the sensors' terms, kept for
         ``bench simulate --baseline``. Equal within float32 rounding.
+    share : bool
+        Compute an object term that is identical in many scenes of the batch (same mesh, pose and albedo:
+        e.g. the gantry's mount and plate in every object scene at one position) once per distinct pose,
+        and add it to each scene's other terms on the node grid, before the zone terms and the time walk
+        (default; with ``cache_chunks`` only). A term is shared when it has at most half as many distinct
+        poses as there are scenes. Equal to ``share=False`` within float32 rounding.
 
     Examples
     --------
@@ -152,7 +181,7 @@ class FastSimulator:
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
                  prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window",
-                 cache_chunks: bool = True):
+                 cache_chunks: bool = True, share: bool = True):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -173,6 +202,8 @@ class FastSimulator:
         self.cache_chunks = bool(cache_chunks)
         self._chunks = None
         self._sensor_terms = None
+        self.share = bool(share)
+        self._shared = None
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
@@ -233,20 +264,77 @@ class FastSimulator:
                             for idx, keep in self._chunk_index()]
         return self._chunks
 
-    def _run(self, parts: bool):
+    def shared_terms(self) -> tuple[tuple[int, ...], np.ndarray, np.ndarray] | None:
+        """The object terms computed once per distinct pose (see ``share``), or None.
+
+        Returns
+        -------
+        terms : tuple of int
+            Indices into the plan's object terms.
+        first : ndarray of int, shape (U,)
+            A scene of each distinct combination of those terms' meshes, poses and albedos.
+        group : ndarray of int, shape (N,)
+            Each scene's combination (an index into ``first``).
+        """
+        plan, n = self.plan, len(self.scenes)
+        if not (self.share and self.cache_chunks) or n < 2:
+            return None
+        terms, keys = [], []
+        for k, (obj, attr) in enumerate(zip(plan.object_index, plan.object_albedo)):
+            near = sorted(plan.object_near_index[k].items())
+            col = [(int(plan.object_mesh_index[k][j]), np.asarray(sc.objects[obj].to_world, np.float64).tobytes(),
+                    float(getattr(sc.objects[obj], attr)), tuple(np.asarray(idx[j]).tobytes() for _, idx in near))
+                   for j, sc in enumerate(self.scenes)]
+            if 2 * len(set(col)) <= n:
+                terms.append(k)
+                keys.append(col)
+        if not terms:
+            return None
+        index: dict = {}
+        group = np.array([index.setdefault(key, len(index)) for key in zip(*keys)])
+        first = np.array([int(np.flatnonzero(group == g)[0]) for g in range(len(index))])
+        return tuple(terms), first, group
+
+    def _shared_node_table(self, terms: dict):
+        """``(terms, group, nodes (S, U, Z, n_nodes) ndarray)`` of :meth:`shared_terms`, computed once, or None."""
+        if self._shared is None:
+            share = self.shared_terms()
+            if share is None:
+                self._shared = False
+            else:
+                only, first, group = share
+                scene_np, _ = self.params()
+                outs = []
+                for start in range(0, len(first), self.chunk):  # chunks of the scenes' shape: one compile each way
+                    idx = first[np.arange(start, start + self.chunk).clip(max=len(first) - 1)]
+                    chunk_p = to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype)
+                    keep = min(self.chunk, len(first) - start)
+                    outs.append(np.asarray(_SHARED(self.plan.static, self._arrays, chunk_p, terms, only))[:, :keep])
+                self._shared = (only, group, np.concatenate(outs, axis=1))
+        return self._shared or None
+
+    def _run(self, parts: bool, progress=None):
         static = self.plan.static
         if self.cache_chunks:
             terms = self._terms()
             chunks = self._chunk_params()
-            run = lambda chunk_p: _BATCHED_TERMS(static, self._arrays, chunk_p, terms, parts)  # noqa: E731
+            shared = self._shared_node_table(terms)
+            if shared is None:
+                run = lambda chunk_p, idx: _BATCHED_TERMS(static, self._arrays, chunk_p, terms, parts)  # noqa: E731
+            else:
+                only, group, nodes = shared
+                run = lambda chunk_p, idx: _BATCHED_SHARED(  # noqa: E731
+                    static, self._arrays, chunk_p, terms, parts, only, jnp.asarray(nodes[:, group[idx]], self.dtype))
         else:  # before issue 20: the chunks gathered from the device arrays and the sensor terms, every call
             scene_p, sensor_p = self._jax_params()
             chunks = [(jax.tree_util.tree_map(lambda a: a[idx], scene_p), keep) for idx, keep in self._chunk_index()]
-            run = lambda chunk_p: _BATCHED(static, self._arrays, chunk_p, sensor_p, parts)  # noqa: E731
+            run = lambda chunk_p, idx: _BATCHED(static, self._arrays, chunk_p, sensor_p, parts)  # noqa: E731
         outs = []
-        for chunk_p, keep in chunks:
-            out = run(chunk_p)
+        for i, ((chunk_p, keep), (idx, _)) in enumerate(zip(chunks, self._chunk_index())):
+            out = run(chunk_p, idx)
             outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, :keep], out))
+            if progress is not None:
+                progress(min(len(self.scenes), (i + 1) * self.chunk), len(self.scenes))
         return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *outs)
 
     def _terms(self) -> dict:
@@ -267,8 +355,15 @@ class FastSimulator:
             a = a[0]
         return a
 
-    def expected(self, parts: bool = False):
+    def expected(self, parts: bool = False, progress=None):
         """Expected counts.
+
+        Parameters
+        ----------
+        parts : bool
+            Also the linear parts.
+        progress : callable, optional
+            Called as ``progress(scenes_done, scenes)`` after each compiled batch call.
 
         Returns
         -------
@@ -279,7 +374,7 @@ class FastSimulator:
             ``counts`` and the linear parts ``direct``, ``object``,
             ``background``, ``crosstalk`` (before pile-up and clipping).
         """
-        out = self._run(parts)
+        out = self._run(parts, progress)
         if parts:
             counts, prt = out
             return {"counts": self._shape(counts), **{k: self._shape(v) for k, v in prt.items()}}

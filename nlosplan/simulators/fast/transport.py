@@ -222,11 +222,21 @@ def _place(out, shift, n_nodes):
     return buf[:, length : length + n_nodes]
 
 
-def object_nodes(static, arrays, scene_p, bw, t0):
-    """Three-bounce photons per iteration per unit photon scale on the node grid, (Z, n_nodes)."""
+def object_nodes(static, arrays, scene_p, bw, t0, terms=None):
+    """Three-bounce photons per iteration per unit photon scale on the node grid, (Z, n_nodes).
+
+    Parameters
+    ----------
+    terms : tuple of int, optional
+        Only these object terms (indices into ``static.objects``; default all). The nodes are a sum over
+        terms, so the terms can be computed apart and added (see :func:`scene_counts`'s ``shared``).
+    """
     grid = static.grid
     total = jnp.zeros((static.n_zones, grid.n_nodes), bw.dtype)
-    for st, a, p, rows in zip(static.objects, arrays["objects"], scene_p["objects"], static.object_rows):
+    for k, (st, a, p, rows) in enumerate(zip(static.objects, arrays["objects"], scene_p["objects"],
+                                             static.object_rows)):
+        if terms is not None and k not in terms:
+            continue
         fn = _retro if st.kind == "retroreflective" else _lambertian
         out, shift = fn(st, a, p, grid, bw, t0)
         total = total.at[jnp.asarray(rows)].add(_place(out, shift, grid.n_nodes))
@@ -292,19 +302,36 @@ def sensor_terms(static, arrays, sensor_p) -> dict:
     return out
 
 
-def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
-    """Expected counts of one scene given its sensor's :func:`sensor_terms` (see :func:`forward`)."""
+def _scene_nodes(static, arrays, scene_p, bw, t0, shared):
+    """All object terms of a scene on the node grid, (Z, n_nodes); ``shared = (terms, nodes)`` adds precomputed ones."""
+    if shared is None:
+        return object_nodes(static, arrays, scene_p, bw, t0)
+    done, nodes = shared
+    rest = tuple(k for k in range(len(static.objects)) if k not in done)
+    return object_nodes(static, arrays, scene_p, bw, t0, terms=rest) + nodes
+
+
+def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False, shared=None):
+    """Expected counts of one scene given its sensor's :func:`sensor_terms` (see :func:`forward`).
+
+    Parameters
+    ----------
+    shared : (tuple of int, array (Z, n_nodes)), optional
+        Object terms already computed (:func:`object_nodes` with ``terms=``, e.g. a gantry mount that is
+        the same in many scenes of a batch) and their nodes: added to the scene's other terms before the
+        zone terms and the time walk, which mix a zone's light of every term.
+    """
     sp = terms["sp"]
     dtype = arrays["direct_w"].dtype
     bw, t0 = sp["bin_width_ps"], sp["start_offset_ps"]
     if static.walk_ps:
-        direct, obj, xt = _walked(static, arrays, scene_p, terms, bw, t0)
+        direct, obj, xt = _walked(static, arrays, scene_p, terms, bw, t0, shared)
     else:
         direct, xt = terms["direct"], terms["crosstalk"]
         obj = jnp.zeros_like(terms["direct"])
         if static.objects:
             obj = sp["photon_scale"] * to_bins(static, terms, zone_nodes(
-                static, arrays, object_nodes(static, arrays, scene_p, bw, t0), bw, t0))
+                static, arrays, _scene_nodes(static, arrays, scene_p, bw, t0, shared), bw, t0))
     lam = direct + obj + xt
     rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
         sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
@@ -320,13 +347,13 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False):
                     "background": jnp.broadcast_to(it * bg, counts.shape), "crosstalk": it * xt}
 
 
-def _walked(static, arrays, scene_p, terms, bw, t0):
+def _walked(static, arrays, scene_p, terms, bw, t0, shared=None):
     """Direct, object and crosstalk photons per bin after the time walk of each zone's total light."""
     sp = terms["sp"]
     parts = [terms["direct_nodes"], jnp.zeros_like(terms["direct_nodes"]), terms["crosstalk_nodes"]]
     if static.objects:
-        parts[1] = sp["photon_scale"] * zone_nodes(static, arrays, object_nodes(static, arrays, scene_p, bw, t0),
-                                                   bw, t0)
+        parts[1] = sp["photon_scale"] * zone_nodes(
+            static, arrays, _scene_nodes(static, arrays, scene_p, bw, t0, shared), bw, t0)
     times = static.grid.node_times(bw, t0)
     shift = walk_shift_ps(sum(window_light(p, times, t0, bw * static.grid.n_bins) for p in parts), static.walk_ps)
     delta = bw / static.grid.oversample
