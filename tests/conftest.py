@@ -1,8 +1,25 @@
+import os
+import tempfile
 from pathlib import Path
 
 import pytest
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+# JAX's on-disk compilation cache (see nlosplan._jax) for this test session only, shared by the tests and the CLI
+# processes they start (set before JAX is imported: JAX reads it then); the user's cache is never touched
+_JAX_CACHE = None
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    _JAX_CACHE = os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="nlosplan-test-jax-")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _jax_cache_removed_at_the_end():
+    yield
+    if _JAX_CACHE:
+        import shutil
+
+        shutil.rmtree(_JAX_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -226,6 +226,7 @@ def write_design_report(result: dict, out) -> dict:
     answer, reqs = answer_table(result), requirements_table(result)
     stab = result.get("stability") or {}
     stab_text = (f"{stab['passed']} of {stab['total']} cases passed in {stab['seconds']:.0f} s"
+                 + (" (this code's result, kept from an earlier run)" if stab.get("cached") else "")
                  + (f"; FAILED: {', '.join(stab['failed'])}" if stab.get("failed") else "")
                  if stab.get("ran") else stab.get("note", "not run"))
     unreachable = result["unreachable"]

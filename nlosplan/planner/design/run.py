@@ -29,6 +29,7 @@ from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
 from nlosplan.planner.design import reference_cache, robust
+from nlosplan.planner.design.catalog import stability_summary
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
 from nlosplan.planner.design.evaluators import evaluate
@@ -326,17 +327,6 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True)
     return sims, real, info
 
 
-def _stability(quick: bool) -> dict:
-    if quick:
-        return {"ran": False, "note": "not run with --quick; run `nlosplan check`"}
-    from nlosplan.stability import all_cases, run_cases
-
-    t0 = time.perf_counter()
-    results = run_cases(all_cases())
-    return {"ran": True, "passed": sum(r.passed for r in results), "total": len(results),
-            "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
-
-
 def check_inputs(cfg: DesignConfig) -> None:
     """What a run needs from outside, checked before any work: the real captures' store and sensor (one line each)."""
     if cfg.real:
@@ -458,8 +448,8 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
             done += 1
             say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
                 done, total)
-    say("stability: the catalog" if not cfg.label.startswith("quick") else "summary: writing")
-    stability = _stability(cfg.label.startswith("quick"))
+    stability = stability_summary(cfg.label.startswith("quick"), cache, say)
+    say("summary: writing")
     result = summarize(search)
     result["_refs"] = ref_info
     return result, stability

@@ -32,6 +32,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
+from nlosplan._jax import jax
 from nlosplan.denali import N_POSITIONS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
@@ -238,6 +239,19 @@ def bench_simulate(
     if not isinstance(sensor_cfg, SensorConfig):
         raise UserError("sensor must be a preset name, a sensor file, or a SensorConfig")
     say = progress or (lambda _text: None)
+    # compile times are measured here, not loaded from the on-disk compilation cache (nlosplan._jax)
+    cached = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    try:
+        return _bench(levels, positions, reference_positions, objects, sizes, sensor_cfg, dtype, repeats, say,
+                      study_level, matmul_n, min_seconds, models, baseline)
+    finally:
+        jax.config.update("jax_enable_compilation_cache", cached)
+
+
+def _bench(levels, positions, reference_positions, objects, sizes, sensor_cfg, dtype, repeats, say, study_level,
+           matmul_n, min_seconds, models, baseline) -> dict:
+    """:func:`bench_simulate` on checked arguments."""
     machine = machine_facts()
     t_start = time.perf_counter()
 
