@@ -42,6 +42,23 @@ def test_toy_accuracy_matches_the_exact_rate_and_the_interval_covers_it():
     assert big["confusion"].sum() == 40000 and big["confusion"].sum(axis=1).tolist() == [20000, 20000]
 
 
+def test_bins_equal_under_every_hypothesis_change_nothing():
+    # a floor and a direct peak the same in every hypothesis and position (most of a real histogram) carry no
+    # information: with them the observer decides exactly as without them, capture for capture
+    rng = np.random.default_rng(3)
+    cube = 20.0 + rng.normal(0.0, 1.0, (4, 3, 16))
+    common = np.concatenate([np.full(200, 1200.0), np.linspace(3e4, 10.0, 40)])
+    padded = np.concatenate([np.broadcast_to(common, (4, 3, common.size)), cube], axis=2)
+    a = observer_accuracy(cube, [0, 0, 1, 1], draws=300, seed=5)
+    b = observer_accuracy(padded, [0, 0, 1, 1], draws=300, seed=5)
+    assert np.array_equal(a["decision"], b["decision"]) and a["accuracy"] == b["accuracy"]
+    assert 0.5 < a["accuracy"] < 1.0
+    # one bin that differs between hypotheses is used
+    informative = padded.copy()
+    informative[2:, :, 0] = 1500.0
+    assert observer_accuracy(informative, [0, 0, 1, 1], draws=300, seed=5)["accuracy"] > 0.99
+
+
 def test_toy_observer_is_deterministic_for_a_seed():
     a = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
     b = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
