@@ -213,7 +213,8 @@ def add(sub) -> None:
                         "an error")
     p.add_argument("--no-cache", action="store_true",
                    help="simulate the references even when an earlier run with the same sensor, scenes and "
-                        "simulator code left them in the cache ($NLOSPLAN_CACHE or ~/.cache/nlosplan)")
+                        "simulator code left them in the cache ($NLOSPLAN_CACHE or ~/.cache/nlosplan), and run "
+                        "the stability catalog even when this code's result is kept there")
     runner = p.add_argument_group("where evaluations run")
     runner.add_argument("--workers", type=int_type(1, 256), default=None,
                         help="local worker processes (default: the CPU count)")
