@@ -204,6 +204,7 @@ class FastSimulator:
         self._sensor_terms = None
         self.share = bool(share)
         self._shared = None
+        self._scene_np = None
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
@@ -252,6 +253,12 @@ class FastSimulator:
         return [(np.arange(start, start + self.chunk).clip(max=min(start + self.chunk, n) - 1),
                  min(self.chunk, n - start)) for start in range(0, n, self.chunk)]
 
+    def _scene_arrays(self) -> dict:
+        """The scenes' parameters of :meth:`params` as host arrays, built once (the chunks and the shared terms slice them)."""
+        if self._scene_np is None:
+            self._scene_np = self.params()[0]
+        return self._scene_np
+
     def _chunk_params(self) -> list[tuple[dict, int]]:
         """Each chunk's scene parameters as JAX arrays with the number of its scenes kept, built once.
 
@@ -259,7 +266,7 @@ class FastSimulator:
         one gather dispatch per leaf and chunk on every call.
         """
         if self._chunks is None:
-            scene_np, _ = self.params()
+            scene_np = self._scene_arrays()
             self._chunks = [(to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype), keep)
                             for idx, keep in self._chunk_index()]
         return self._chunks
@@ -303,7 +310,7 @@ class FastSimulator:
                 self._shared = False
             else:
                 only, first, group = share
-                scene_np, _ = self.params()
+                scene_np = self._scene_arrays()
                 outs = []
                 for start in range(0, len(first), self.chunk):  # chunks of the scenes' shape: one compile each way
                     idx = first[np.arange(start, start + self.chunk).clip(max=len(first) - 1)]
