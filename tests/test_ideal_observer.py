@@ -59,6 +59,22 @@ def test_bins_equal_under_every_hypothesis_change_nothing():
     assert observer_accuracy(informative, [0, 0, 1, 1], draws=300, seed=5)["accuracy"] > 0.99
 
 
+def test_the_float32_product_decides_as_float64():
+    # DENALI-like counts: a floor of ~1e3 per bin (the real one) under small object signals, 8 hypotheses in 4
+    # classes at 6 positions; the centred float32 product must take float64's decision for every capture
+    rng = np.random.default_rng(11)
+    floor = np.concatenate([np.full(60, 1000.0), 3e4 * np.exp(-np.arange(20) / 3.0), np.full(220, 1000.0)])
+    signal = np.abs(rng.normal(0.0, 4.0, (8, 6, floor.size))) * (np.arange(floor.size) > 80)
+    cube = floor + signal
+    cls = [0, 0, 1, 1, 2, 2, 3, 3]
+    a = observer_accuracy(cube, cls, draws=600, seed=2, precision="float64")
+    b = observer_accuracy(cube, cls, draws=600, seed=2)
+    assert 0.3 < a["accuracy"] < 0.95  # neither trivial nor hopeless: decisions are close calls
+    assert np.array_equal(a["decision"], b["decision"])
+    with pytest.raises(UserError, match="unknown precision 'float16'"):
+        observer_accuracy(cube, cls, draws=10, precision="float16")
+
+
 def test_toy_observer_is_deterministic_for_a_seed():
     a = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
     b = observer_accuracy(TOY, [0, 1], draws=50, seed=7)
@@ -79,6 +95,13 @@ def test_identical_classes_are_ties_broken_at_random():
     out = observer_accuracy(np.full((3, 2, 4), 6.0), [0, 1, 2], draws=3000, seed=0)
     assert out["accuracy"] == pytest.approx(1 / 3, abs=0.03)
     assert np.all(out["confusion"].sum(axis=0) > 2500)  # every decision is taken, not always the first
+    # the same with informative bins (positions differ) in both precisions of the product
+    per_position = 1000.0 + 50.0 * np.random.default_rng(4).random((5, 700))
+    cube = np.broadcast_to(per_position, (3, 5, 700))
+    for precision in ("float32", "float64"):
+        out = observer_accuracy(cube, [0, 1, 2], draws=3000, seed=0, precision=precision)
+        assert out["accuracy"] == pytest.approx(1 / 3, abs=0.03)
+        assert np.all(out["confusion"].sum(axis=0) > 2500)
 
 
 # ----------------------------------------------------------------------------- DENALI
