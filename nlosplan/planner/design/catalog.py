@@ -2,7 +2,9 @@
 
 The catalog (:mod:`nlosplan.stability`: stiff and extreme cases of the sensor models and simulators) checks the
 code, not the run's inputs: its result depends only on the source of the rooms it covers and on the numerical
-libraries. The full main job runs it once (about 2.5 minutes on 2 cores) and keeps the summary in
+libraries. The full main job runs it once (about 2.5 minutes of one core), as one more job on its executor beside the
+references it simulates (:func:`run_catalog`; in this process at the end when no reference is simulated), and keeps
+the summary in
 ``$NLOSPLAN_CACHE/stability/KEY.json`` (or ``~/.cache/nlosplan/stability``), KEY the SHA-256 of
 :func:`~nlosplan.planner.design.reference_cache.code_version`, the source of the catalog and runner, and the
 versions of JAX, jaxlib and NumPy; a later run with the same key reports that summary, marked ``cached``.
@@ -20,7 +22,7 @@ from nlosplan.errors import UserError
 from nlosplan.files import write_json
 from nlosplan.planner.design import reference_cache
 
-__all__ = ["stability_summary", "catalog_key"]
+__all__ = ["stability_summary", "kept_summary", "run_catalog", "keep", "catalog_key"]
 
 
 def catalog_key() -> str:
@@ -41,8 +43,59 @@ def _path() -> Path:
     return reference_cache.cache_dir().parent / "stability" / f"{catalog_key()}.json"
 
 
+def kept_summary(quick: bool, cache: bool = True) -> dict | None:
+    """The summary a run reports without running the catalog, or None when it must run.
+
+    ``--quick`` runs do not run it (they say so); with ``cache``, an earlier run's entry for this
+    :func:`catalog_key` is taken (marked ``cached``). An unreadable entry counts as none.
+    """
+    if quick:
+        return {"ran": False, "note": "not run with --quick; run `nlosplan check`"}
+    path = _path() if cache else None
+    if path is not None and path.is_file():
+        try:
+            kept = json.loads(path.read_text())
+            if {"passed", "total", "failed", "seconds"} <= set(kept):
+                return {**kept, "ran": True, "cached": True}
+        except (OSError, ValueError):
+            pass  # unreadable: run it again and replace the entry
+    return None
+
+
+def run_catalog(job=None) -> dict:
+    """Run the whole catalog here; its summary (module-level, so a design run's executor can run it as a job).
+
+    Parameters
+    ----------
+    job : CatalogJob, optional
+        Only names the work (:class:`~nlosplan.planner.design.jobs.CatalogJob`); the catalog has no inputs.
+
+    Returns
+    -------
+    dict
+        ``status`` (``"ok"``), ``ran``, ``passed``, ``total``, ``failed`` (case names), ``seconds``.
+    """
+    from nlosplan.stability import all_cases, run_cases
+
+    t0 = time.perf_counter()
+    results = run_cases(all_cases())
+    return {"status": "ok", "ran": True, "passed": sum(r.passed for r in results), "total": len(results),
+            "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
+
+
+def keep(summary: dict, cache: bool = True) -> dict:
+    """Put a fresh summary in the cache (with ``cache``); the report's form of it (``cached`` False)."""
+    out = {k: summary[k] for k in ("ran", "passed", "total", "failed", "seconds")}
+    if cache:
+        try:
+            write_json(_path(), out)
+        except (OSError, UserError):
+            pass  # a cache that cannot be written is only a lost speed-up; the summary is in this run's report
+    return {**out, "cached": False}
+
+
 def stability_summary(quick: bool, cache: bool = True, say=None) -> dict:
-    """The catalog's summary for a design run's report.
+    """The catalog's summary for a design run's report (run here when no earlier one is kept).
 
     Parameters
     ----------
@@ -59,27 +112,9 @@ def stability_summary(quick: bool, cache: bool = True, say=None) -> dict:
         ``ran``, ``passed``, ``total``, ``failed`` (case names), ``seconds`` (of the run that computed it) and
         ``cached`` (True when taken from an earlier run).
     """
-    if quick:
-        return {"ran": False, "note": "not run with --quick; run `nlosplan check`"}
-    path = _path() if cache else None
-    if path is not None and path.is_file():
-        try:
-            kept = json.loads(path.read_text())
-            if {"passed", "total", "failed", "seconds"} <= set(kept):
-                return {**kept, "ran": True, "cached": True}
-        except (OSError, ValueError):
-            pass  # unreadable: run it again and replace the entry
-    from nlosplan.stability import all_cases, run_cases
-
+    kept = kept_summary(quick, cache)
+    if kept is not None:
+        return kept
     if say:
         say("stability: the catalog")
-    t0 = time.perf_counter()
-    results = run_cases(all_cases())
-    out = {"ran": True, "passed": sum(r.passed for r in results), "total": len(results),
-           "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
-    if path is not None:
-        try:
-            write_json(path, out)
-        except (OSError, UserError):
-            pass  # a cache that cannot be written is only a lost speed-up; the summary is in this run's report
-    return {**out, "cached": False}
+    return keep(run_catalog(), cache)

@@ -23,7 +23,7 @@ from nlosplan.planner.design.requirements import Condition, Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.sensor_models import SensorConfig
 
-__all__ = ["DesignJob", "OptimizeJob", "ReferenceJob", "EVALUATORS"]
+__all__ = ["DesignJob", "OptimizeJob", "ReferenceJob", "CatalogJob", "EVALUATORS"]
 
 #: ``bound`` (CRLB / ideal observer), ``trained`` (models on the trained reference: real captures when given),
 #: ``trained_sim`` (models on the simulated reference, beside real ones).
@@ -151,3 +151,16 @@ class ReferenceJob:
     def to_dict(self) -> dict:
         return {"path": self.path, "sensor": self.sensor.to_dict(), "scenes": self.scenes.to_dict(),
                 "label": self.label}
+
+
+@dataclass(frozen=True)
+class CatalogJob:
+    """The stability catalog (:func:`~nlosplan.planner.design.catalog.run_catalog`), run beside the references.
+
+    It has no inputs: the job only names it for progress and for a failure's record.
+    """
+
+    label: str = "stability catalog"
+
+    def to_dict(self) -> dict:
+        return {"label": self.label}

@@ -29,12 +29,13 @@ from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
 from nlosplan.planner.design import reference_cache, robust
-from nlosplan.planner.design.catalog import stability_summary
+from nlosplan.planner.design.catalog import keep as stability_keep
+from nlosplan.planner.design.catalog import kept_summary, run_catalog, stability_summary
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.executors import make_executor
-from nlosplan.planner.design.jobs import ReferenceJob
+from nlosplan.planner.design.jobs import CatalogJob, ReferenceJob
 from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, optimize_jobs
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
 from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig
@@ -275,27 +276,54 @@ def _layout_design(space: DesignSpace, layout) -> Design:
     return Design(layout, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
 
 
-def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True) -> dict:
-    """Run reference jobs on the executor (in parallel); ``label -> seconds``. A failure stops the run.
+def _prepare(job) -> dict:
+    """One job of the preparation stages, on any executor: a reference to simulate, or the stability catalog."""
+    if isinstance(job, CatalogJob):
+        return run_catalog(job)
+    return build_reference(job)
 
-    With ``cache``, a reference an earlier run left in :mod:`.reference_cache` is copied instead of simulated,
-    and a simulated one is put there.
+
+def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True,
+              catalog: bool = False) -> tuple[dict, dict | None]:
+    """Run reference jobs on the executor (in parallel); ``label -> seconds`` and the catalog's summary.
+
+    A failure stops the run. With ``cache``, a reference an earlier run left in :mod:`.reference_cache` is
+    copied instead of simulated, and a simulated one is put there. The largest layouts start first (the
+    executors start jobs in order, so the longest does not run alone at the end). With ``catalog``, the
+    stability catalog runs as one more job, after the largest reference, when any reference is simulated;
+    its summary is returned (None when it did not run: the caller runs it).
     """
     if cache:
         jobs = [j for j in jobs if Path(j.path).exists() or not reference_cache.restore(j.path, j.sensor, j.scenes, say)]
-    out = {}
-    for i, (job, res) in enumerate(executor.map(build_reference, jobs)):
+    jobs = sorted(jobs, key=lambda j: -j.sensor.zones_rows * j.sensor.zones_cols)
+    if catalog and jobs:
+        jobs.insert(1, CatalogJob())
+    out, summary = {}, None
+    for i, (job, res) in enumerate(executor.map(_prepare, jobs)):
+        if isinstance(job, CatalogJob):
+            if res.get("status") == "ok":
+                summary = stability_keep(res, cache)
+            else:
+                say(f"{what}: the stability catalog stopped on its worker ({res.get('reason')}); it runs again at "
+                    "the end")
+            say(f"{what}: {job.label}", i + 1, len(jobs))
+            continue
         if res.get("status") != "ok":
             raise RuntimeError(f"simulating the {job.label} reference failed: {res.get('reason')}")
         out[job.label] = res["seconds"]
         say(f"{what}: {job.label}", i + 1, len(jobs))
         if cache:
             reference_cache.store(job.path, job.sensor, job.scenes)
-    return out
+    return out, summary
 
 
-def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True) -> tuple[dict, dict, dict]:
-    """Simulated reference per zone layout (reused when saved with the same key); real ones if asked."""
+def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
+                catalog: bool = False) -> tuple[dict, dict, dict, dict | None]:
+    """Simulated reference per zone layout (reused when saved with the same key); real ones if asked.
+
+    With ``catalog``, the stability catalog runs beside the references it simulates; its summary is the last
+    item (None when it did not run).
+    """
     from nlosplan.planner.design.data import load_reference
 
     sims, real, info, jobs = {}, {}, {}, []
@@ -306,9 +334,11 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True)
         sims[f"{z[0]}x{z[1]}"] = path
         if not path.exists():
             jobs.append(ReferenceJob(str(path), sensor, scenes, f"{z[0]}x{z[1]}"))
+    stability = None
     if jobs:
-        say(f"references: simulating {len(jobs)} ({scenes.n_scenes} scenes each)")
-        _simulate(executor, jobs, say, "references", cache)
+        beside = " and the stability catalog" if catalog else ""
+        say(f"references: simulating {len(jobs)} ({scenes.n_scenes} scenes each){beside}")
+        stability = _simulate(executor, jobs, say, "references", cache, catalog)[1]
     for layout, path in sims.items():
         ref = load_reference(path)
         info[layout] = {"scenes": int(len(ref.labels)), "bound_scenes": int(len(ref.crlb_labels)),
@@ -324,7 +354,7 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True)
         for z in space.zones:
             real[f"{z[0]}x{z[1]}"] = path  # unreachable layouts are reported per evaluation
         info["real"] = {"captures": int(len(ds)), "source": str(cfg.real), "sensor": captured.name}
-    return sims, real, info
+    return sims, real, info, stability
 
 
 def check_inputs(cfg: DesignConfig) -> None:
@@ -411,7 +441,10 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
 def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
             worlds: robust.WorldPlan | None, cache: bool = True) -> tuple[dict, dict | None]:
     """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
-    sims, real, ref_info = _references(cfg, out, say, executor, cache)
+    quick = cfg.label.startswith("quick")
+    stability = kept_summary(quick, cache)  # None: the catalog runs beside the references, or at the end
+    sims, real, ref_info, ran = _references(cfg, out, say, executor, cache, catalog=stability is None)
+    stability = stability or ran
     if worlds is not None and cfg.worlds.scene_step == 1:  # the worlds' scenes are the run's: world 0 is its own
         worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None, worlds)
@@ -448,7 +481,8 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
             done += 1
             say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
                 done, total)
-    stability = stability_summary(cfg.label.startswith("quick"), cache, say)
+    if stability is None:
+        stability = stability_summary(quick, cache, say)
     say("summary: writing")
     result = summarize(search)
     result["_refs"] = ref_info
