@@ -34,9 +34,11 @@ demo: setup
 	$(BIN)/nlosplan design
 
 # Tests marked slow (whole-catalog and end-to-end runs that have faster siblings) run only
-# when CI is set (CI=true make test, as .ci/run is called) or with SLOW=1.
+# when CI is set (CI=true make test, as .ci/run is called) or with SLOW=1. They run on
+# TEST_WORKERS processes (pytest-xdist; default one per core), a test file per worker.
+TEST_WORKERS ?= auto
 test: setup
-	$(BIN)/python -m pytest -q $(if $(or $(CI),$(SLOW)),,-m "not slow")
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(if $(or $(CI),$(SLOW)),,-m "not slow")
 
 check: setup
 	$(BIN)/nlosplan check

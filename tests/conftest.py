@@ -6,16 +6,15 @@ import pytest
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
-# JAX's on-disk compilation cache (see nlosplan._jax) for this test session only, shared by the tests and the CLI
-# processes they start (set before JAX is imported: JAX reads it then); the user's cache is never touched
+# JAX's on-disk compilation cache (see nlosplan._jax) for this test session only, shared by the tests, the CLI
+# processes they start and pytest-xdist's workers (set before JAX is imported, and before the workers start: they
+# inherit it); the user's cache is never touched. The process that made it removes it at the end.
 _JAX_CACHE = None
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     _JAX_CACHE = os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="nlosplan-test-jax-")
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _jax_cache_removed_at_the_end():
-    yield
+def pytest_unconfigure(config):
     if _JAX_CACHE:
         import shutil
 
