@@ -38,6 +38,12 @@ def init_worker(parent: int | None = None) -> None:
     if parent is not None:
         _exit_with_parent(parent)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    # numpy's BLAS started its threads (one per core) when numpy was imported, before this runs: the variable
+    # above comes too late for it, and two workers' matrix products (the ideal observer's) ran four threads
+    # on two cores
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
     try:
         import torch
 
