@@ -63,8 +63,13 @@ def test_the_catalog_runs_beside_the_references_largest_first(tmp_path, monkeypa
         return {"path": job.path, "status": "ok", "seconds": 1.0, "scenes": 1, "label": job.label}
 
     real_catalog = run.run_catalog
+
+    def catalog_job(job):
+        order.append(job.label)
+        return real_catalog(job)
+
     monkeypatch.setattr(run, "build_reference", fake_reference)
-    monkeypatch.setattr(run, "run_catalog", lambda job: (order.append(job.label), real_catalog(job))[1])
+    monkeypatch.setattr(run, "run_catalog", catalog_job)
     scenes = SceneSet(objects=("A",), positions=(0,), repeats=1, crlb_objects=(), fidelity="draft")
     base = preset("tmf8828-3x3-short")
     jobs = [ReferenceJob(str(tmp_path / f"{r}x{r}.npz"), base.replace(zones_rows=r, zones_cols=r), scenes, f"{r}x{r}")

@@ -254,7 +254,10 @@ class FastSimulator:
                  min(self.chunk, n - start)) for start in range(0, n, self.chunk)]
 
     def _scene_arrays(self) -> dict:
-        """The scenes' parameters of :meth:`params` as host arrays, built once (the chunks and the shared terms slice them)."""
+        """The scenes' parameters of :meth:`params` as host arrays, built once.
+
+        The chunks and the shared terms both slice them.
+        """
         if self._scene_np is None:
             self._scene_np = self.params()[0]
         return self._scene_np
