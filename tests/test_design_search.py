@@ -155,3 +155,26 @@ def test_bad_spaces_name_the_problem():
         DesignSpace(photon_fraction=(0.0, 1.0))
     assert parse_requirement("size>=0.9@lights=on").condition == ("lights", "on")
     assert np.isclose(parse_requirement(" loc <= 0.03 ").threshold, 0.03)
+
+
+def test_observer_bounds_carry_the_thresholds_they_may_stop_at():
+    from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
+    from nlosplan.planner.design.optimize import optimize_jobs
+
+    size_low = Requirement("size", 0.8)
+    search = DesignSearch(SPACE, [LOC, SIZE, size_low], SearchConfig(grid_points=3, seeds=1), REFS)
+    d = search.base
+    # the ideal observer of a task stops once clear of every threshold of that task; the Cramér–Rao bound is exact
+    assert search.job("bound", SIZE, d).fidelity["stop_at"] == [0.8, 0.9]
+    assert search.job("bound", SIZE, d).key == search.job("bound", size_low, d).key  # one job for both
+    assert "stop_at" not in search.job("bound", LOC, d).fidelity
+    assert "stop_at" not in search.job("trained", SIZE, d).fidelity
+    assert DEFAULT_FIDELITY["bound"]["looks"] > 1
+    # one look: every draw, no thresholds in the job
+    fid = {k: dict(v) for k, v in DEFAULT_FIDELITY.items()}
+    fid["bound"]["looks"] = 1
+    one = DesignSearch(SPACE, [SIZE], SearchConfig(grid_points=3, seeds=1, fidelity=fid), REFS)
+    assert "stop_at" not in one.job("bound", SIZE, d).fidelity
+    # the optimizer's corrected bound is a continuous objective: it draws every capture
+    search.ingest([fake_result(j) for j in search.suggest()])
+    assert all("stop_at" not in j.fidelity for j in optimize_jobs(search))

@@ -149,3 +149,54 @@ def test_bad_inputs_are_user_errors():
         observer_accuracy(TOY, [0, 1], draws=0)
     with pytest.raises(UserError, match="at least two"):
         ideal_observer("shape", SENSOR, objects=["A"])
+
+
+# ----------------------------------------------------------------------------- stopping once clear of a threshold
+def test_the_observer_stops_after_a_round_far_from_every_threshold():
+    full = observer_accuracy(TOY, [0, 1], draws=400, seed=3)
+    assert full["draws"] == 400 and not full["stopped_early"] and full["n"] == 800
+    # the toy's accuracy is ~0.83: thresholds 0.5 and 0.99 are both far outside a round's 99.9 % interval
+    early = observer_accuracy(TOY, [0, 1], draws=400, seed=3, stop_at=[0.5, 0.99], looks=4)
+    assert early["stopped_early"] and early["draws"] == 100 and early["n"] == 200
+    assert early["confusion"].sum(axis=1).tolist() == [100, 100]  # every round is stratified over the classes
+    assert early["truth"].size == early["decision"].size == 200
+    assert early["accuracy"] == pytest.approx(TRUE_ACCURACY, abs=0.08)
+    assert early["ci"][0] <= TRUE_ACCURACY <= early["ci"][1]
+    # a threshold at the accuracy itself never clears: every draw is made
+    close = observer_accuracy(TOY, [0, 1], draws=400, seed=3, stop_at=[TRUE_ACCURACY], looks=4)
+    assert not close["stopped_early"] and close["draws"] == 400 and close["n"] == 800
+    # one look is the full run, whatever the thresholds
+    one = observer_accuracy(TOY, [0, 1], draws=400, seed=3, stop_at=[0.5], looks=1)
+    assert one["draws"] == 400 and not one["stopped_early"]
+    # draws not divisible by the looks: rounds of ceil(draws / looks)
+    odd = observer_accuracy(TOY, [0, 1], draws=10, seed=3, stop_at=[0.01], looks=3)
+    assert odd["draws"] in (4, 8, 10) and odd["n"] == 2 * odd["draws"]
+
+
+def test_an_early_stop_lands_on_the_side_of_the_threshold_a_full_run_takes():
+    # threshold 0.76 is ~7 % under the toy's accuracy: decided from a round of 100 draws per class in most seeds,
+    # and every stopped run says "above", as the full runs do
+    stopped = 0
+    for seed in range(40):
+        full = observer_accuracy(TOY, [0, 1], draws=400, seed=seed)
+        early = observer_accuracy(TOY, [0, 1], draws=400, seed=seed, stop_at=[0.76], looks=4)
+        assert full["ci"][0] > 0.76
+        if early["stopped_early"]:
+            stopped += 1
+            assert early["ci"][0] > 0.76
+    assert stopped >= 20
+
+
+def test_no_threshold_draws_exactly_as_before():
+    a = observer_accuracy(TOY, [0, 1], draws=300, seed=9)
+    b = observer_accuracy(TOY, [0, 1], draws=300, seed=9, looks=4)
+    assert np.array_equal(a["decision"], b["decision"]) and np.array_equal(a["truth"], b["truth"])
+
+
+def test_bad_stopping_knobs_are_user_errors():
+    with pytest.raises(UserError, match="looks=0 must be >= 1"):
+        observer_accuracy(TOY, [0, 1], draws=5, stop_at=[0.5], looks=0)
+    with pytest.raises(UserError, match=r"stop_confidence=1.5 must be in \(0, 1\)"):
+        observer_accuracy(TOY, [0, 1], draws=5, stop_at=[0.5], stop_confidence=1.5)
+    with pytest.raises(UserError, match="stop_at must be finite"):
+        observer_accuracy(TOY, [0, 1], draws=5, stop_at=[float("nan")])

@@ -168,7 +168,8 @@ def _draw_plan(rng, class_of, n_pos, draws):
 def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bool = False, rule: str = "marginal",
                       same_group=None, noise: bool = True, max_count: int | None = None, confidence: float = 0.95,
                       ci_method: str = "wilson", class_names=None, chunk_bytes: int = 1 << 27,
-                      precision: str = "float32", progress=None) -> dict:
+                      precision: str = "float32", stop_at=None, looks: int = 4, stop_confidence: float = 0.999,
+                      progress=None) -> dict:
     """Monte-Carlo accuracy of the ideal observer on precomputed expected counts.
 
     Parameters
@@ -206,6 +207,17 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         log-likelihood gaps of order 1; ×1.5 faster there, decisions equal to float64's (a difference
         would need a gap under 5e-4 nats, a likelihood ratio within 0.05 % of 1). Identical hypotheses
         get identical log-likelihoods in either precision, so their ties stay ties.
+    stop_at : sequence of float, optional
+        Accuracies that matter (a requirement's threshold): the captures are drawn in ``looks`` equal,
+        stratified rounds, and the Monte Carlo stops after a round once the ``stop_confidence`` interval
+        (``ci_method``) of the accuracy so far lies wholly above or below every one of them, so a design
+        far from every threshold costs a round, not ``draws``. None: all ``draws`` (the default).
+    looks : int
+        Rounds of ``stop_at`` (each ``ceil(draws / looks)`` captures per class).
+    stop_confidence : float
+        Level of the stopping interval, stricter than ``confidence`` because it is looked at up to
+        ``looks`` times: at 0.999 and 4 looks the chance that it stops on the wrong side of a threshold the
+        full run would have put it on the other side of is at most 0.4 %.
     progress : callable, optional
         ``progress(done, total)`` in noisy captures after each chunk.
 
@@ -213,7 +225,8 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     -------
     dict
         ``accuracy``, ``ci``, ``confusion`` (C, C), ``per_class_accuracy``
-        (C,), ``n``, ``truth`` and ``decision`` (n,) class indices.
+        (C,), ``n`` (captures drawn), ``draws`` (per class drawn: ``draws`` unless
+        stopped early), ``stopped_early``, ``truth`` and ``decision`` (n,) class indices.
 
     Notes
     -----
@@ -239,6 +252,13 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         raise UserError(f"draws={draws} must be >= 1")
     if precision not in ("float32", "float64"):
         raise UserError(f"unknown precision {precision!r}; allowed: float32, float64")
+    if int(looks) < 1:
+        raise UserError(f"looks={looks} must be >= 1")
+    if not 0 < stop_confidence < 1:
+        raise UserError(f"stop_confidence={stop_confidence} must be in (0, 1)")
+    stops = () if stop_at is None else tuple(float(v) for v in np.atleast_1d(stop_at))
+    if not all(math.isfinite(v) for v in stops):
+        raise UserError(f"stop_at must be finite accuracies; got {stop_at!r}")
     n_h, n_p, _ = lam.shape
     n_c = int(class_of.max()) + 1
     if set(np.unique(class_of)) != set(range(n_c)):
@@ -246,28 +266,48 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     group = None if same_group is None else np.asarray(same_group)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     truth_h, truth_p = _draw_plan(rng, class_of, n_p, int(draws))
-    log_lam = np.log(np.maximum(lam, LAM_FLOOR)).reshape(n_h * n_p, -1)
-    total = lam.sum(axis=2).reshape(-1)
+    rounds = [np.arange(truth_h.size)]
+    if stops:  # stratified rounds: round k holds the k-th slice of every class's draws
+        per = -(-int(draws) // int(looks))
+        order = np.arange(truth_h.size).reshape(n_c, int(draws))
+        rounds = [order[:, k:k + per].reshape(-1) for k in range(0, int(draws), per)]
+        truth_h, truth_p = truth_h[np.concatenate(rounds)], truth_p[np.concatenate(rounds)]
+        rounds = np.split(np.arange(truth_h.size), np.cumsum([r.size for r in rounds])[:-1])
+    flat = lam.reshape(n_h * n_p, -1)
+    total = flat.sum(axis=1)
     total -= total.mean()
     # a bin whose expectation is the same under every hypothesis and position (before the earliest object light:
     # the floor and the direct return; 57 % of the main job's 8x8 bins) adds the same log-likelihood to every
-    # hypothesis: it cannot change a decision, so it is neither drawn nor multiplied
-    informative = np.flatnonzero(np.ptp(log_lam, axis=0) > 0)
+    # hypothesis: it cannot change a decision, so it is neither drawn nor multiplied (the logarithm's spread, taken
+    # only where the expectation itself differs: rounding-level differences the logarithm does not keep stay out)
+    informative = np.flatnonzero(np.ptp(np.maximum(flat, LAM_FLOOR), axis=0) > 0)
+    log_lam = np.log(np.maximum(flat[:, informative], LAM_FLOOR))
+    kept = np.ptp(log_lam, axis=0) > 0
+    informative, log_lam = informative[kept], log_lam[:, kept]
     if informative.size == 0:
         informative = np.arange(1)
-    log_lam = log_lam[:, informative]
+        log_lam = np.log(np.maximum(flat[:, :1], LAM_FLOOR))
+    lam_obs = flat[:, informative]
     log_lam -= log_lam.mean(axis=0)
-    lam_obs = lam.reshape(n_h, n_p, -1)[:, :, informative]
+    lam_obs = lam_obs.reshape(n_h, n_p, -1)
     if precision == "float32":
         centre = lam_obs.reshape(n_h * n_p, -1).mean(axis=0)
         total = total - log_lam @ centre  # (Y - mu) @ L^T + mu @ L^T - sum(Lam): the constant part in float64
         log_lam = log_lam.astype(np.float32)
     members = [np.flatnonzero(class_of == c) for c in range(n_c)]
-    decision = np.empty(truth_h.size, np.int64)
+    decision = np.full(truth_h.size, -1, np.int64)
     # a chunk's (draws x H*P) log-likelihoods and its (draws x D) captures both fit in chunk_bytes
     step = max(1, int(chunk_bytes // (8 * max(n_h * n_p, log_lam.shape[1]))))
-    for start in range(0, truth_h.size, step):
-        th, tp = truth_h[start:start + step], truth_p[start:start + step]
+    chunks = [(r[0] + i, min(r[0] + i + step, r[-1] + 1), k) for k, r in enumerate(rounds)
+              for i in range(0, r.size, step)]
+    done = 0
+    for start, stop, k in chunks:
+        if k > 0 and start == rounds[k][0]:  # a round ends: stop once its interval is clear of every threshold
+            lo, hi = binomial_interval(int(np.sum(class_of[truth_h[:start]] == decision[:start])), start,
+                                       stop_confidence, ci_method)
+            if all(v < lo or v > hi for v in stops):
+                break
+        th, tp = truth_h[start:stop], truth_p[start:stop]
         y = lam_obs[th, tp]
         if noise:
             y = rng.poisson(y).astype(np.float64)
@@ -295,17 +335,19 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
                 score[:, c] = np.where(ok, lse - np.log(np.maximum(n_cons, 1)), -np.inf)
         best = score.max(axis=1, keepdims=True)
         tied = score >= best - TIE_NATS
-        decision[start:start + step] = np.argmax(np.where(tied, rng.random(score.shape), -1.0), axis=1)
+        decision[start:stop] = np.argmax(np.where(tied, rng.random(score.shape), -1.0), axis=1)
+        done = stop
         if progress is not None:
-            progress(min(start + step, truth_h.size), truth_h.size)
-    truth = class_of[truth_h]
+            progress(stop, truth_h.size)
+    truth, decision = class_of[truth_h[:done]], decision[:done]
     confusion = np.zeros((n_c, n_c), np.int64)
     np.add.at(confusion, (truth, decision), 1)
     correct = int(np.trace(confusion))
     names = tuple(class_names) if class_names is not None else tuple(str(c) for c in range(n_c))
     return {"accuracy": correct / truth.size, "ci": binomial_interval(correct, truth.size, confidence, ci_method),
             "confusion": confusion, "per_class_accuracy": np.diag(confusion) / confusion.sum(axis=1),
-            "n": int(truth.size), "truth": truth, "decision": decision, "classes": names}
+            "n": int(truth.size), "draws": int(truth.size // n_c), "stopped_early": bool(done < truth_h.size),
+            "truth": truth, "decision": decision, "classes": names}
 
 
 def _positions(positions) -> list[int]:

@@ -99,7 +99,7 @@ def _schema() -> dict:
         "cost": {k: number_in(0) for k in CostModel().to_dict()},
         "search": {"grid_points": count, "refine_steps": int_in(0), "seeds": int_in(1, 20), "candidates": count,
                    "optimize_evals": count, "fidelity": table_of()},
-        "bound": {"draws": count, "crlb_repeats": count},
+        "bound": {"draws": count, "looks": count, "crlb_repeats": count},
         "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
                     "bootstrap": int_in(0)},
         "scenes": {"objects": objects, "sizes": list_of(one_of(*SIZES), min_len=1),

@@ -15,8 +15,11 @@ Evaluators
     scenes (from the simulated reference's Jacobian, degraded to the design;
     no interval: it is exact for those scenes). Shape and size: the ideal observer's Monte-Carlo accuracy
     (Poisson likelihood under every hypothesis, position and the other
-    label unknown), Wilson interval. A bound is optimistic: a design that
-    fails it fails every model.
+    label unknown), Wilson interval; with ``fidelity["stop_at"]`` (the search
+    passes its requirements' thresholds of the task) the captures are drawn
+    in ``looks`` rounds and stop once the accuracy's 99.9 % interval is clear
+    of every threshold (``extra["draws"]``: per class drawn). A bound is
+    optimistic: a design that fails it fails every model.
 ``trained``
     A benchmark model (``fidelity["model"]``: the run's best learner of the
     task) trained on noisy captures of the design (repeats averaged), random
@@ -49,7 +52,7 @@ __all__ = ["evaluate", "trained_metric", "DEFAULT_FIDELITY"]
 #: Knobs of each evaluator (the error-against-run-time axis of the report). The trained evaluator's
 #: ``model`` is set per task by the search (the run's best learner); "mlp" where none is chosen.
 DEFAULT_FIDELITY: dict[str, dict] = {
-    "bound": {"draws": 400, "crlb_repeats": 1},
+    "bound": {"draws": 400, "looks": 4, "crlb_repeats": 1},
     "trained": {"model": "mlp", "epochs": 30, "width": 0.25, "repeats": 2, "bootstrap": 200},
 }
 
@@ -79,7 +82,7 @@ def _crlb(ref, deg, repeats: int, condition) -> tuple[float, str]:
     return value, (f"{len(bad)} of {n} scenes not identifiable: {bad[0]}" if bad else "")
 
 
-def _observer(ref, deg, task: str, draws: int, seed: int, condition) -> tuple[float, tuple[float, float]]:
+def _observer(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[float, tuple[float, float], dict]:
     from nlosplan.tasks.ideal_observer import observer_accuracy
 
     means = ref.design_means(deg)
@@ -99,10 +102,12 @@ def _observer(ref, deg, task: str, draws: int, seed: int, condition) -> tuple[fl
         classes = sorted({s for _, s in hyps})
         class_of = [classes.index(s) for _, s in hyps]
     if len(classes) < 2:
-        return math.nan, (math.nan, math.nan)
-    res = observer_accuracy(cube, np.asarray(class_of), draws=draws, seed=seed,
-                            max_count=ref.sensor.max_count if ref.sensor.saturation else None)
-    return float(res["accuracy"]), tuple(float(v) for v in res["ci"])
+        return math.nan, (math.nan, math.nan), {}
+    res = observer_accuracy(cube, np.asarray(class_of), draws=int(fid["draws"]), seed=seed,
+                            max_count=ref.sensor.max_count if ref.sensor.saturation else None,
+                            stop_at=fid.get("stop_at") or None, looks=int(fid.get("looks", 1)))
+    return (float(res["accuracy"]), tuple(float(v) for v in res["ci"]),
+            {"draws": res["draws"], "stopped_early": res["stopped_early"]})
 
 
 def _bootstrap(values_fn, n: int, draws: int, seed: int) -> tuple[float, float]:
@@ -210,8 +215,8 @@ def evaluate(job: DesignJob) -> dict:
             value, note = _crlb(ref, deg, int(job.fidelity.get("crlb_repeats", 1)), job.condition)
             out.update(value=value, lo=value, hi=value, reason=note)
         elif job.evaluator == "bound":
-            value, (lo, hi) = _observer(ref, deg, job.task, int(job.fidelity["draws"]), int(job.seed), job.condition)
-            out.update(value=value, lo=lo, hi=hi)
+            value, (lo, hi), extra = _observer(ref, deg, job.task, job.fidelity, int(job.seed), job.condition)
+            out.update(value=value, lo=lo, hi=hi, extra=extra)
         else:
             value, (lo, hi), extra = _trained(ref, deg, job.task, job.fidelity, int(job.seed), job.condition)
             out.update(value=value, lo=lo, hi=hi, extra=extra)

@@ -36,7 +36,8 @@ def optimize_jobs(search) -> list[OptimizeJob]:
                 base = search.base.replace(zones=z, bin_factor=f, n_bins=search.space.max_bins(f))
                 proto = search.job("bound", req, base)
                 jobs.append(OptimizeJob(req, gap, search.space, search.cost, base, search.config.optimize_evals,
-                                        {**proto.fidelity, "draws": max(100, proto.fidelity["draws"] // 2)},
+                                        {**{k: v for k, v in proto.fidelity.items() if k != "stop_at"},
+                                         "draws": max(100, proto.fidelity["draws"] // 2)},
                                         proto.reference, proto.reference_sensor))
     return jobs
 

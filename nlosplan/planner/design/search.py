@@ -142,6 +142,9 @@ class DesignSearch:
         fid = self.config.fidelity["trained" if evaluator == "trained_sim" else evaluator]
         if evaluator != "bound":
             fid = {**fid, "model": model or self.learner(req.task)}
+        elif req.task != "loc" and int(fid.get("looks", 1)) > 1:  # the observer stops once clear of every threshold
+            fid = {**fid, "stop_at": sorted({r.threshold for r in self.requirements
+                                             if r.task == req.task and str(r.condition) == str(req.condition)})}
         return DesignJob(evaluator, req.task, d, self.config.seed_of(seed), fid, req.condition,
                          str(reference or refs[self._layout(d)]), self.space.sensor.to_dict(), world)
 
