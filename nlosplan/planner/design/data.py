@@ -184,6 +184,32 @@ class ReferenceData:
             return np.minimum(cap, self.sensor.max_count) if self.sensor.saturation else cap
         return degrade_counts(self.counts, d, rng)[:, None]
 
+    def design_mean_capture(self, d: Degradation, rng, repeats: int) -> np.ndarray:
+        """The mean of ``repeats`` noisy captures of the design, (N, R', C', B') float64 (real: the capture rows).
+
+        Simulated: drawn as one Poisson sum per bin, ``S ~ Poisson(repeats * lam)``, divided by ``repeats`` --
+        the same distribution as the mean of ``repeats`` independent captures (:meth:`design_captures`) at a
+        ``1 / repeats`` of the draws. With saturation, a sum above the sensor's ``max_count`` is split into its
+        captures (multinomially: given the sum, that is their joint law) and each clipped first, so it stays exact.
+        """
+        rng = np.random.default_rng(rng)
+        if self.means is None:
+            return degrade_counts(self.counts, d, rng).astype(np.float64)
+        lam = degrade_expected(self.means, d)
+        total = rng.poisson(repeats * lam.astype(np.float64))
+        if self.sensor.saturation and repeats > 1 and np.any(total > self.sensor.max_count):
+            over = np.flatnonzero(total > self.sensor.max_count)
+            left, clipped = total.reshape(-1)[over], np.zeros(over.size, np.int64)
+            for k in range(repeats, 1, -1):  # one capture's share of what is left, then the rest
+                part = rng.binomial(left, 1.0 / k)
+                clipped += np.minimum(part, self.sensor.max_count)
+                left = left - part
+            clipped += np.minimum(left, self.sensor.max_count)
+            total.reshape(-1)[over] = clipped
+        elif self.sensor.saturation:
+            total = np.minimum(total, self.sensor.max_count)
+        return total / float(repeats)
+
     def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:
         """``(lam, jac)`` of the localization-bound scenes under the design."""
         if self.crlb_lam is None:

@@ -122,8 +122,8 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     from nlosplan.data.dataset import Dataset
 
     torch.set_num_threads(1)
-    caps = ref.design_captures(deg, np.random.default_rng([seed, 7]), int(fid["repeats"]))
-    hist = caps.mean(axis=1).astype(np.float32)  # repeats averaged, as DENALI does
+    # repeats averaged, as DENALI does (drawn as one Poisson sum: the same law at a 1 / repeats of the draws)
+    hist = ref.design_mean_capture(deg, np.random.default_rng([seed, 7]), int(fid["repeats"])).astype(np.float32)
     labels = ref.labels.copy()
     labels["zones"] = f"{hist.shape[1]}x{hist.shape[2]}"
     labels["repeat"] = -1
