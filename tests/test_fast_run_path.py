@@ -42,3 +42,24 @@ def test_single_scene_call_reuses_its_parameters():
     assert first.shape == (3, 3, 128) and len(chunks) == 1 and terms["irf"].shape[0] == 1
     np.testing.assert_array_equal(sim.expected(), first)
     assert sim._chunks is chunks and sim._sensor_terms is terms
+
+
+def test_sensors_of_nearby_jitter_share_one_plan_structure_and_its_results_are_theirs():
+    # the design run's worlds differ in jitter (47-100 ps FWHM here): one plan structure, so one compiled program;
+    # the support sized for the rounded sigma changes nothing but the Gaussian's mass beyond 9 sigma
+    from nlosplan.simulators.fast.plan import SUPPORT_SIGMA_STEP_PS, support_sigma_ps
+
+    assert support_sigma_ps(0.0) == 0.0 and support_sigma_ps(SUPPORT_SIGMA_STEP_PS) == SUPPORT_SIGMA_STEP_PS
+    assert support_sigma_ps(1.0) == support_sigma_ps(42.5) == SUPPORT_SIGMA_STEP_PS
+    assert support_sigma_ps(SUPPORT_SIGMA_STEP_PS + 1) == 2 * SUPPORT_SIGMA_STEP_PS
+    base = resolve_sensor("tmf8828-3x3-short")
+    scenes = [denali_scene("A", "8in", 10, albedo=0.36, diffuse_albedo=0.2)]
+    sims = [FastSimulator(scenes, base.replace(jitter_fwhm_ps=j), fidelity="draft") for j in (47.7, 65.6, 100.4)]
+    assert len({s.plan.static for s in sims}) == 1
+    assert FastSimulator(scenes, base.replace(jitter_fwhm_ps=300.0), fidelity="draft").plan.static != sims[0].plan.static
+    # each equals the same sensor in a batch sized for a much wider Gaussian (sigma ~ 850 ps: support 7.6 ns wider)
+    for j in (47.7, 65.6, 100.4):
+        wide = FastSimulator(scenes, sensors=[base.replace(jitter_fwhm_ps=j), base.replace(jitter_fwhm_ps=2000.0)],
+                             fidelity="draft", dtype="float64").expected()[0]
+        own = FastSimulator(scenes, base.replace(jitter_fwhm_ps=j), fidelity="draft", dtype="float64").expected()
+        assert np.abs(own - wide).max() <= 1e-9 * np.abs(own).max()

@@ -40,6 +40,16 @@ DYNAMIC_SENSOR_FIELDS = (
     "bin_width_ps", "start_offset_ps", "pulse_fwhm_ps", "jitter_fwhm_ps", "photon_scale",
     "iterations", "ambient_rate_hz", "dark_rate_hz", "crosstalk",
 )
+#: The impulse response's support and the time grid are sized for a Gaussian sigma rounded up to this step (ps), so
+#: sensors whose jitter differs a little (the design run's worlds) share one plan structure and one compiled program;
+#: a wider support adds only the Gaussian's mass beyond 9 sigma (< 1e-18) and a few empty grid bins.
+SUPPORT_SIGMA_STEP_PS = 50.0
+
+
+def support_sigma_ps(sigma_ps: float) -> float:
+    """The Gaussian sigma (ps) a plan sizes its support and grid for: ``sigma`` rounded up to :data:`SUPPORT_SIGMA_STEP_PS`
+    (0 stays 0: no Gaussian)."""
+    return SUPPORT_SIGMA_STEP_PS * math.ceil(float(sigma_ps) / SUPPORT_SIGMA_STEP_PS - 1e-9) if sigma_ps > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -351,9 +361,10 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
 
     sigmas = [s.sigma_ps for s in sensors]
     sigma_max = max(sigmas)
+    support = support_sigma_ps(sigma_max)  # the support's sigma: sensors of nearby jitter share one plan structure
     # arrival times that can reach the window through the impulse response and the time walk's largest shift
-    reach = (min(s.start_offset_ps - irf_extent_ps(s)[1] - _moves(s) for s in sensors),
-             max(s.start_offset_ps + s.window_ps - irf_extent_ps(s)[0] + _moves(s) for s in sensors))
+    reach = (min(s.start_offset_ps - irf_extent_ps(s, support)[1] - _moves(s) for s in sensors),
+             max(s.start_offset_ps + s.window_ps - irf_extent_ps(s, support)[0] + _moves(s) for s in sensors))
     # latest possible arrival: direct paths and the farthest object path via the wall's corners
     t_hi = float(path.max()) / C_M_PER_PS if direct else 0.0
     r_wall = float(np.linalg.norm(base.wall.corners() - base.lidar.position, axis=1).max())
@@ -362,7 +373,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
             v = obj.world_vertices()
             d = np.linalg.norm(base.wall.corners()[:, None] - v[None], axis=-1).max()
             t_hi = max(t_hi, 2 * (r_wall + float(d)) / C_M_PER_PS)
-    grids = [TimeGrid.for_sensor(s, 0.0, t_hi, oversample=fid.time_oversample, sigma_ps=sigma_max) for s in sensors]
+    grids = [TimeGrid.for_sensor(s, 0.0, t_hi, oversample=fid.time_oversample, sigma_ps=support) for s in sensors]
     first = min(g.first_bin for g in grids)
     last = max(g.first_bin + g.n_grid_bins for g in grids)
     grid = TimeGrid(fid.time_oversample, first, last - first, sensor.n_bins)
@@ -423,7 +434,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
 
     p = pulse_boxes(sensor)
     pulse = None if p is None else (tuple(p[0].tolist()), float(p[1]), tuple(p[2].tolist()))
-    lo, hi = irf_extent_ps(sensor, sigma_max)
+    lo, hi = irf_extent_ps(sensor, support)
     static = PlanStatic(
         grid=grid, n_zones=len(zones_out), direct=direct, crosstalk=crosstalk, irf=irf, pulse=pulse, extent=(lo, hi),
         nominal_bin_width=float(sensor.bin_width_ps), pileup=sensor.pileup, saturation=sensor.saturation,
