@@ -67,6 +67,13 @@ class PoolExecutor:
                 exc = f.exception()
                 yield job, (_failed(job, exc) if exc else f.result())
 
+    def recycle(self) -> None:
+        """Replace the workers by fresh ones (after the simulation stages: what a worker compiled and cached for
+        a reference -- 2.5-2.9 GB for the 8x8 one or the stability catalog -- is not carried into the evaluations)."""
+        self._pool.shutdown(wait=True)
+        self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=init_worker, initargs=(os.getpid(),))
+
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
 

@@ -277,10 +277,26 @@ def _layout_design(space: DesignSpace, layout) -> Design:
 
 
 def _prepare(job) -> dict:
-    """One job of the preparation stages, on any executor: a reference to simulate, or the stability catalog."""
-    if isinstance(job, CatalogJob):
-        return run_catalog(job)
-    return build_reference(job)
+    """One job of the preparation stages, on any executor: a reference to simulate, or the stability catalog.
+
+    The programs it compiled are dropped from memory after it (they stay in the on-disk compilation cache): no
+    two jobs of a stage share one, except the worlds', which load it from disk.
+    """
+    import gc
+
+    import jax
+
+    try:
+        return run_catalog(job) if isinstance(job, CatalogJob) else build_reference(job)
+    finally:
+        jax.clear_caches()
+        gc.collect()
+
+
+def _recycle(executor) -> None:
+    """Fresh workers for the evaluations after a simulation stage (executors that have them)."""
+    if hasattr(executor, "recycle"):
+        executor.recycle()
 
 
 def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True,
@@ -291,7 +307,9 @@ def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = 
     copied instead of simulated, and a simulated one is put there. The largest layouts start first (the
     executors start jobs in order, so the longest does not run alone at the end). With ``catalog``, the
     stability catalog runs as one more job, after the largest reference, when any reference is simulated;
-    its summary is returned (None when it did not run: the caller runs it).
+    its summary is returned (None when it did not run: the caller runs it). When anything ran, a local pool's
+    workers are replaced by fresh ones (:meth:`PoolExecutor.recycle`): the evaluations do not carry the
+    memory of the simulations (the cold main job peaked at 4.6 GB without it).
     """
     if cache:
         jobs = [j for j in jobs if Path(j.path).exists() or not reference_cache.restore(j.path, j.sensor, j.scenes, say)]
@@ -314,6 +332,8 @@ def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = 
         say(f"{what}: {job.label}", i + 1, len(jobs))
         if cache:
             reference_cache.store(job.path, job.sensor, job.scenes)
+    if jobs:
+        _recycle(executor)
     return out, summary
 
 
