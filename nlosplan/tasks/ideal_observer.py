@@ -216,8 +216,8 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         Rounds of ``stop_at`` (each ``ceil(draws / looks)`` captures per class).
     stop_confidence : float
         Level of the stopping interval, stricter than ``confidence`` because it is looked at up to
-        ``looks`` times: at 0.999 and 4 looks the chance that it stops on the wrong side of a threshold the
-        full run would have put it on the other side of is at most 0.4 %.
+        ``looks`` times: at 0.999 and 4 looks the chance that any look's interval misses the true accuracy
+        (the only way to stop with a threshold on the wrong side of it) is at most 0.4 % (a union bound).
     progress : callable, optional
         ``progress(done, total)`` in noisy captures after each chunk.
 
