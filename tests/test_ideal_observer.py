@@ -187,7 +187,7 @@ def test_an_early_stop_lands_on_the_side_of_the_threshold_a_full_run_takes():
     assert stopped >= 20
 
 
-def test_no_threshold_draws_exactly_as_before():
+def test_looks_without_thresholds_change_nothing():
     a = observer_accuracy(TOY, [0, 1], draws=300, seed=9)
     b = observer_accuracy(TOY, [0, 1], draws=300, seed=9, looks=4)
     assert np.array_equal(a["decision"], b["decision"]) and np.array_equal(a["truth"], b["truth"])

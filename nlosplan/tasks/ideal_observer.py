@@ -266,13 +266,14 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     group = None if same_group is None else np.asarray(same_group)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     truth_h, truth_p = _draw_plan(rng, class_of, n_p, int(draws))
-    rounds = [np.arange(truth_h.size)]
+    starts = [0]  # where each round begins in the draw order
     if stops:  # stratified rounds: round k holds the k-th slice of every class's draws
         per = -(-int(draws) // int(looks))
         order = np.arange(truth_h.size).reshape(n_c, int(draws))
-        rounds = [order[:, k:k + per].reshape(-1) for k in range(0, int(draws), per)]
-        truth_h, truth_p = truth_h[np.concatenate(rounds)], truth_p[np.concatenate(rounds)]
-        rounds = np.split(np.arange(truth_h.size), np.cumsum([r.size for r in rounds])[:-1])
+        parts = [order[:, k:k + per].reshape(-1) for k in range(0, int(draws), per)]
+        perm = np.concatenate(parts)
+        truth_h, truth_p = truth_h[perm], truth_p[perm]
+        starts = [0, *np.cumsum([p.size for p in parts])[:-1].tolist()]
     flat = lam.reshape(n_h * n_p, -1)
     total = flat.sum(axis=1)
     total -= total.mean()
@@ -298,11 +299,11 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
     decision = np.full(truth_h.size, -1, np.int64)
     # a chunk's (draws x H*P) log-likelihoods and its (draws x D) captures both fit in chunk_bytes
     step = max(1, int(chunk_bytes // (8 * max(n_h * n_p, log_lam.shape[1]))))
-    chunks = [(r[0] + i, min(r[0] + i + step, r[-1] + 1), k) for k, r in enumerate(rounds)
-              for i in range(0, r.size, step)]
+    ends = [*starts[1:], truth_h.size]
+    chunks = [(i, min(i + step, end)) for begin, end in zip(starts, ends) for i in range(begin, end, step)]
     done = 0
-    for start, stop, k in chunks:
-        if k > 0 and start == rounds[k][0]:  # a round ends: stop once its interval is clear of every threshold
+    for start, stop in chunks:
+        if start in starts[1:]:  # a round ends: stop once its interval is clear of every threshold
             lo, hi = binomial_interval(int(np.sum(class_of[truth_h[:start]] == decision[:start])), start,
                                        stop_confidence, ci_method)
             if all(v < lo or v > hi for v in stops):

@@ -175,20 +175,11 @@ class ReferenceData:
             raise UserError("real captures have no expected counts; the bounds use the simulated reference")
         return degrade_expected(self.means, d)
 
-    def design_captures(self, d: Degradation, rng, repeats: int) -> np.ndarray:
-        """Noisy captures of the design, (N, repeats, R', C', B') int64 (real: one per capture row)."""
-        rng = np.random.default_rng(rng)
-        if self.means is not None:
-            lam = degrade_expected(self.means, d)
-            cap = rng.poisson(np.broadcast_to(lam[:, None], (lam.shape[0], repeats) + lam.shape[1:]))
-            return np.minimum(cap, self.sensor.max_count) if self.sensor.saturation else cap
-        return degrade_counts(self.counts, d, rng)[:, None]
-
     def design_mean_capture(self, d: Degradation, rng, repeats: int) -> np.ndarray:
         """The mean of ``repeats`` noisy captures of the design, (N, R', C', B') float64 (real: the capture rows).
 
         Simulated: drawn as one Poisson sum per bin, ``S ~ Poisson(repeats * lam)``, divided by ``repeats`` --
-        the same distribution as the mean of ``repeats`` independent captures (:meth:`design_captures`) at a
+        the same distribution as the mean of ``repeats`` independent Poisson captures (clipped at saturation) at a
         ``1 / repeats`` of the draws. With saturation, a sum above the sensor's ``max_count`` is split into its
         captures (multinomially: given the sum, that is their joint law) and each clipped first, so it stays exact.
         """
