@@ -92,6 +92,68 @@ def test_jacobian_matches_finite_differences(lights_on):
         np.testing.assert_allclose(jac[0, ..., i], fd, rtol=2e-3, atol=2e-4 * np.abs(fd).max(), err_msg=names[i])
 
 
+def test_jacobian_matches_forward_mode_differentiation(lights_on):
+    """The central differences (10 nm, 1e-8 in log units) against jax.jvp of the same float64 model."""
+    from nlosplan._jax import jax, jnp
+    from nlosplan.sensor_models.transient import deposit_method
+    from nlosplan.simulators.fast.simulator import to_jax
+    from nlosplan.simulators.fast.transport import sensor_terms
+    from nlosplan.tasks import bounds
+
+    lam, jac, names, sim = counts_and_jacobian(lights_on, SENSOR, fidelity=FID, nuisance=ALL)
+    scene_p, sensor_p = sim.params()
+    sc = jax.tree_util.tree_map(lambda a: a[0], to_jax(scene_p, jnp.float64))
+    sp = jax.tree_util.tree_map(lambda a: a[0], to_jax(sensor_p, jnp.float64))
+    arrays = to_jax(sim.plan.arrays, jnp.float64)
+    axes = jnp.asarray(np.eye(3)[:2])
+    static = sim.plan.static
+
+    def counts(t):
+        with deposit_method(static.deposit):
+            return bounds._counts(static, arrays, sc, sensor_terms(static, arrays, sp), axes, ALL, t)
+
+    ad = np.asarray(jax.jacfwd(counts)(jnp.zeros(len(names))))
+    assert np.all(np.abs(ad).max(axis=(0, 1)) > 0)  # every parameter moves the counts of this lights-on scene
+    # a difference of counts lam over a step h carries float64 rounding ~ eps lam / h: far below the Poisson
+    # noise sqrt(lam) per unit of the parameter's information
+    rounding = 1e3 * np.finfo(float).eps * lam[0] / bounds.POSITION_STEP_M
+    assert bounds.LOG_STEP == bounds.POSITION_STEP_M
+    for i, name in enumerate(names):
+        err = np.abs(jac[0, ..., i] - ad[..., i])
+        tol = 1e-4 * np.abs(ad[..., i]) + 1e-7 * np.abs(ad[..., i]).max() + rounding
+        assert np.all(err <= tol), (name, float((err / tol).max()))
+
+
+def test_mount_shared_across_objects_gives_the_unshared_jacobian(monkeypatch):
+    """The mount's light at the five displacements, computed once per position, equals each scene's own."""
+    scenes = [denali_scene(o, "8in", p, mount=True, mount_in_background=False, albedo=0.4, diffuse_albedo=0.2)
+              for o in ("A", "S") for p in (0, 47)]
+    nuis = ("photon_scale", "albedo")
+    theta = [0.001, -0.002, 0.05, 0.1]
+    lam, jac, _, sim = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
+    assert sim.shared_terms() is not None  # the mount and its plate: 2 poses under 4 scenes
+    monkeypatch.setattr(FastSimulator, "shared_terms", lambda self: None)
+    own, own_jac, *_ = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
+    np.testing.assert_allclose(lam, own, rtol=1e-12, atol=1e-9)
+    scale = np.abs(own_jac).max(axis=(0, 1, 2))
+    assert np.all(scale > 0)
+    np.testing.assert_allclose(jac, own_jac, rtol=1e-6, atol=1e-6 * scale.max())
+
+
+def test_slopes_take_the_side_without_a_jump_and_average_a_smooth_pair():
+    from nlosplan.tasks.bounds import _slopes
+
+    h = 1e-8
+    lam0 = np.array([100.0, 100.0, 100.0, 100.0])
+    # smooth (slope 3, curvature), jump of 0.5 between 0 and +h, jump between -h and 0, a kink (slope 3 | 5)
+    up = lam0 + np.array([3 * h + 1e-14, 3 * h + 0.5, 3 * h, 5 * h])
+    down = lam0 - np.array([3 * h - 1e-14, 3 * h, 3 * h + 0.5, 3 * h])
+    got = np.asarray(_slopes(lam0, up, down, h))
+    np.testing.assert_allclose(got, [3.0, 3.0, 3.0, 3.0], rtol=1e-5)
+    # a jump's central difference would be 0.5 / 2e-8 = 2.5e7 counts per metre
+    assert np.all(np.abs(got) < 10)
+
+
 def test_position_parameters_translate_the_object_pose():
     shift = np.array([0.005, -0.003, 0.0])
     lam, *_ = counts_and_jacobian(SCENE, SENSOR, fidelity=FID, nuisance=NUIS, theta=[shift[0], shift[1], 0.0, 0.0])

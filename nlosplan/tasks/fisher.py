@@ -18,7 +18,8 @@ __all__ = ["COND_MAX", "analyse_fisher", "poisson_fisher"]
 
 #: Equilibrated Fisher matrices with a larger condition number are (numerically) singular.
 COND_MAX = 1e10
-#: A null direction whose position component is below this counts as orthogonal to the position.
+#: A null direction whose component along a parameter is below this counts as orthogonal to it (it does not
+#: name the parameter, and leaves a position estimable). The Jacobian's central differences are exact to ~1e-8.
 _ORTHO_TOL = 1e-6
 
 
@@ -109,7 +110,7 @@ def analyse_fisher(fisher, names, n_position: int = 2, cond_max: float = COND_MA
         null = w <= w.max() / cond_max
         cond = float(w.max() / w.min()) if w.min() > 0 else math.inf
         for k in np.flatnonzero(null):
-            nulls.append({names[sub[i]]: float(v[i, k]) for i in range(sub.size) if abs(v[i, k]) > 1e-9})
+            nulls.append({names[sub[i]]: float(v[i, k]) for i in range(sub.size) if abs(v[i, k]) > _ORTHO_TOL})
             reasons.append(_describe(v[:, k], [names[i] for i in sub]) + f" (condition number {cond:.1e})")
         keep = ~null
         inv = (v[:, keep] / w[keep]) @ v[:, keep].T

@@ -4,8 +4,8 @@ For each candidate gantry position the nominal simulator gives the
 expected counts split into parts (first bounce ``direct``, hidden
 ``object``, ``background``: ambient and dark) and the derivative of the
 counts with respect to a world (x, y) shift of the object
-(:func:`~nlosplan.tasks.bounds.counts_and_jacobian`, forward-mode through
-the fast simulator). The calibration parameters are
+(:func:`~nlosplan.tasks.bounds.counts_and_jacobian`, central differences of
+the fast simulator in float64). The calibration parameters are
 
 ``theta = (dx, dy, log g, log a)``: a registration offset of the gantry in
 the world (m), the photon scale factor ``g`` and the object albedo factor
