@@ -6,10 +6,16 @@ import math
 import numpy as np
 import pytest
 
+from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
+from nlosplan.sensor_models.transient import deposit_method
 from nlosplan.simulators import FastSimulator, corner_scene, denali_scene
+from nlosplan.simulators.fast.simulator import to_jax
+from nlosplan.simulators.fast.transport import sensor_terms
+from nlosplan.tasks import bounds
 from nlosplan.tasks.bounds import (
+    _slopes,
     analyse_fisher,
     counts_and_jacobian,
     localization_crlb,
@@ -94,12 +100,6 @@ def test_jacobian_matches_finite_differences(lights_on):
 
 def test_jacobian_matches_forward_mode_differentiation(lights_on):
     """The central differences (10 nm, 1e-8 in log units) against jax.jvp of the same float64 model."""
-    from nlosplan._jax import jax, jnp
-    from nlosplan.sensor_models.transient import deposit_method
-    from nlosplan.simulators.fast.simulator import to_jax
-    from nlosplan.simulators.fast.transport import sensor_terms
-    from nlosplan.tasks import bounds
-
     lam, jac, names, sim = counts_and_jacobian(lights_on, SENSOR, fidelity=FID, nuisance=ALL)
     scene_p, sensor_p = sim.params()
     sc = jax.tree_util.tree_map(lambda a: a[0], to_jax(scene_p, jnp.float64))
@@ -141,8 +141,6 @@ def test_mount_shared_across_objects_gives_the_unshared_jacobian(monkeypatch):
 
 
 def test_slopes_take_the_side_without_a_jump_and_average_a_smooth_pair():
-    from nlosplan.tasks.bounds import _slopes
-
     h = 1e-8
     lam0 = np.array([100.0, 100.0, 100.0, 100.0])
     # smooth (slope 3, curvature), jump of 0.5 between 0 and +h, jump between -h and 0, a kink (slope 3 | 5)
