@@ -168,9 +168,15 @@ def test_design_page_follows_a_growing_log_then_shows_the_answer(design_run, bro
             fh.write("".join(lines[5:n_bound + 3]))
         page.wait_for_selector(f"[data-k=done]:text-is('{n_bound + 3}')")
         assert text_of(page, "stage") == "learners"   # the learners are compared on the reference design after the screen
-        points = page.evaluate("""(names) => names.map(n =>
-            Bokeh.documents[0].get_model_by_name('tradedata:' + n).get_length())""", result["requirements_asked"])
-        assert sum(points) == sum(1 for l in lines[:n_bound + 3] if json.loads(l)["status"] == "ok")
+        ok = sum(1 for l in lines[:n_bound + 3] if json.loads(l)["status"] == "ok")
+        count = """(names) => names.map(n => Bokeh.documents[0].get_model_by_name('tradedata:' + n).get_length())
+            .reduce((a, b) => a + b, 0)"""
+        # the plots' data come in their own document patches, after the counters: wait for them (under load the
+        # counter can show first), then check that nothing more arrives
+        page.wait_for_function(f"(names) => ({count})(names) >= {ok}", arg=result["requirements_asked"],
+                               timeout=30_000)
+        time.sleep(1.0)
+        assert page.evaluate(count, result["requirements_asked"]) == ok
         # the run ends: the whole log, its final checkpoint, result.json
         shutil.copy(out / CHECKPOINT, live / CHECKPOINT)
         (live / EVALUATIONS).write_text("".join(lines))
