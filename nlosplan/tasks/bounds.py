@@ -28,8 +28,8 @@ import numpy as np
 from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
 from nlosplan.sensor_models.transient import deposit_method
+from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS, Fidelity
 from nlosplan.simulators.fast.simulator import FastSimulator, to_jax
 from nlosplan.simulators.fast.transport import object_nodes, scene_counts, sensor_terms
 from nlosplan.simulators.scene import Scene
@@ -85,20 +85,6 @@ def _scaled(terms, names, nu):
     return terms
 
 
-def _counts(static, arrays, scene_p, terms, axes, names, theta):
-    """Expected counts (Z, B) with the objects moved by ``theta[:2] @ axes`` and nuisances scaled by exp.
-
-    ``terms``: the sensor's :func:`~nlosplan.simulators.fast.transport.sensor_terms` at the nominal
-    nuisances. The albedo is the first object term's. Call inside ``deposit_method(static.deposit)``.
-    """
-    moved = _moved(scene_p, axes, theta[:2])
-    if "albedo" in names:
-        obj = dict(moved["objects"][0])
-        obj["albedo"] = obj["albedo"] * jnp.exp(theta[2 + names.index("albedo")])
-        moved["objects"] = [obj] + moved["objects"][1:]
-    return scene_counts(static, arrays, moved, _scaled(terms, names, theta[2:]))
-
-
 def _slopes(lam0, up, down, step):
     """d lam / d theta from counts at ``theta`` and ``theta +- step`` along one parameter, (Z, B) each.
 
@@ -120,13 +106,18 @@ def _position_points(theta, step):
     return theta[None, :2] + jnp.concatenate([jnp.zeros((1, 2), theta.dtype), eye, -eye])
 
 
+def _nodes_at(static, arrays, scene_p, axes, points, bw, t0, terms):
+    """Object ``terms`` of one scene on the node grid at each displacement of ``points``, (5, Z, n_nodes)."""
+    return jax.lax.map(lambda pos: object_nodes(static, arrays, _moved(scene_p, axes, pos), bw, t0, terms=terms),
+                       points)
+
+
 def _term_nodes(static, arrays, scenes_p, sensor_p, axes, theta, steps, only):
     """Object terms ``only`` of each scene at the five displacements, (N, 5, Z, n_nodes) (see :func:`_lam_jac`)."""
     bw, t0 = sensor_p["bin_width_ps"], sensor_p["start_offset_ps"]
     points = _position_points(theta, steps[0])
     with deposit_method(static.deposit):
-        return jax.lax.map(lambda sc: jax.lax.map(
-            lambda pos: object_nodes(static, arrays, _moved(sc, axes, pos), bw, t0, terms=only), points), scenes_p)
+        return jax.lax.map(lambda sc: _nodes_at(static, arrays, sc, axes, points, bw, t0, only), scenes_p)
 
 
 def _lam_jac(static, names, arrays, scenes_p, sensor_p, axes, theta, steps, shared, shared_nodes):
@@ -138,10 +129,9 @@ def _lam_jac(static, names, arrays, scenes_p, sensor_p, axes, theta, steps, shar
     every object at a position), and the nuisances' ``+-step`` reuse the undisplaced light on the node grid
     (the albedo scales the first term's, which is linear in it). Forward-mode differentiation (``jvp`` over
     the parameters) gave the same bounds to 6e-5 per scene (float64, calibrated 1x1, 3x3 and 8x8 layouts, 60
-    DENALI scenes) and took 3-10 times longer to compile (3x3: 20.6 s against ~6 s).
+    DENALI scenes) and took 3-12 times longer to compile (3x3: 20.6 s against 6.3 s, 8x8: 40.7 s against 3.4 s).
     """
-    p = theta.size
-    nuis = list(range(2, p))
+    q = theta.size - 2  # nuisances
     with deposit_method(static.deposit):
         terms = sensor_terms(static, arrays, sensor_p)  # the same for every scene and every displacement
         bw, t0 = terms["sp"]["bin_width_ps"], terms["sp"]["start_offset_ps"]
@@ -155,17 +145,16 @@ def _lam_jac(static, names, arrays, scenes_p, sensor_p, axes, theta, steps, shar
             if albedo is not None:  # at theta's albedo (the first term is never in ``shared`` then)
                 obj = dict(sc["objects"][0], albedo=sc["objects"][0]["albedo"] * jnp.exp(theta[2 + albedo]))
                 sc = {**sc, "objects": [obj] + list(sc["objects"][1:])}
-            nodes = jax.lax.map(lambda pos: object_nodes(static, arrays, _moved(sc, axes, pos), bw, t0, terms=rest),
-                                points) + done
+            nodes = _nodes_at(static, arrays, sc, axes, points, bw, t0, rest) + done
             evals = [(nodes[i], theta[2:]) for i in range(5)]
             if albedo is not None:
                 term0 = object_nodes(static, arrays, _moved(sc, axes, points[0]), bw, t0, terms=(0,))
             for sign in (1.0, -1.0):
-                for k in nuis:
-                    nu = theta[2:].at[k - 2].add(sign * steps[k])
+                for j in range(q):
+                    nu = theta[2:].at[j].add(sign * steps[2 + j])
                     n0 = nodes[0]
-                    if albedo is not None and k - 2 == albedo:
-                        n0 = n0 + (jnp.exp(nu[albedo] - theta[2 + albedo]) - 1.0) * term0
+                    if j == albedo:
+                        n0 = n0 + (jnp.exp(nu[j] - theta[2 + j]) - 1.0) * term0
                     evals.append((n0, nu))
             stacked = (jnp.stack([e[0] for e in evals]), jnp.stack([e[1] for e in evals]))
             lam = jax.lax.map(lambda e: scene_counts(static, arrays, sc, _scaled(terms, names, e[1]),
@@ -173,7 +162,6 @@ def _lam_jac(static, names, arrays, scenes_p, sensor_p, axes, theta, steps, shar
             # rows: 0; +x, +y, -x, -y; +nu_k ..., -nu_k ...
             cols = [_slopes(lam[0], lam[1 + k], lam[3 + k], 0.5 * (points[1 + k, k] - points[3 + k, k]))
                     for k in range(2)]
-            q = len(nuis)
             cols += [_slopes(lam[0], lam[5 + j], lam[5 + q + j], steps[2 + j]) for j in range(q)]
             return lam[0], jnp.stack(cols, axis=-1)
 
