@@ -57,6 +57,10 @@ def test_json_has_the_required_keys_and_types(run):
     assert result["reference"]["half_knobs"]["object_samples"] == SMALL_REFERENCE.object_samples // 2
     assert result["config"]["positions"] == list(range(6)) and result["config"]["reference_positions"] == [0]
     assert result["machine"]["cpu_count"] >= 1 and result["machine"]["jax_devices"]
+    # the levels ran with the compiled deposit (the test machines have a C++ compiler), and the run says so
+    kernel = result["config"]["deposit_kernel"]
+    assert result["config"]["deposit"] == "kernel" and kernel["available"] and kernel["why"].endswith(".so")
+    assert f"deposit: kernel (the compiled kernel, {kernel['why']})" in run[1]
     assert len(steps) == bench.bench_steps(LEVELS, (0,), MODELS, baseline=True) and all(isinstance(s, str) and s for s in steps)
     json.dumps(result, allow_nan=False)  # strict JSON: no NaN or infinity
 

@@ -1,4 +1,5 @@
-"""The deposit onto the node grid: the windowed scatter (issue 20) equals the two scalar scatters of before."""
+"""The deposit onto the node grid: the compiled kernel and the windowed scatter (issue 20) equal the two scalar
+scatters of before, values and derivatives."""
 
 import numpy as np
 import pytest
@@ -16,13 +17,14 @@ def test_methods_agree_on_random_arrivals_incl_off_grid_and_gradients():
     w = jnp.asarray(rng.uniform(0.0, 1.0, 2000))
     rows = jnp.asarray(rng.integers(0, 7, 2000))
     out = {}
-    for m in ("window", "scatter"):
+    for m in ("kernel", "window", "scatter"):
         with deposit_method(m):
             out[m] = np.asarray(deposit_at(pos, w, rows, 7, 40))
             g = jax.grad(lambda p: (deposit_at(p, w, rows, 7, 40) * jnp.arange(40.0)).sum())(pos)
             out[m + "_grad"] = np.asarray(g)
-    np.testing.assert_allclose(out["window"], out["scatter"], rtol=1e-6, atol=1e-12)
-    np.testing.assert_allclose(out["window_grad"], out["scatter_grad"], rtol=1e-6, atol=1e-12)
+    for m in ("kernel", "window"):
+        np.testing.assert_allclose(out[m], out["scatter"], rtol=1e-6, atol=1e-12)
+        np.testing.assert_allclose(out[m + "_grad"], out["scatter_grad"], rtol=1e-6, atol=1e-12)
     # an arrival between the first and the last node keeps all its weight and its mean position
     inside = (np.asarray(pos) >= 0) & (np.asarray(pos) <= 39)
     with deposit_method("window"):
@@ -41,16 +43,17 @@ def test_methods_agree_on_random_arrivals_incl_off_grid_and_gradients():
 def test_simulator_new_deposit_equals_old_on_denali_scenes(options):
     sensor = resolve_sensor("tmf8828-3x3-short")
     scenes = [denali_scene(o, s, p, **options) for o, s, p in (("A", "8in", 0), ("circle", "4in", 47), ("3", "8in", 99))]
-    new = FastSimulator(scenes, sensor, fidelity="draft", deposit="window").expected(parts=True)
     old = FastSimulator(scenes, sensor, fidelity="draft", deposit="scatter").expected(parts=True)
-    for part in ("counts", "object", "direct"):
-        a, b = np.asarray(new[part], np.float64), np.asarray(old[part], np.float64)
-        assert np.abs(b).max() > 0
-        assert np.abs(a - b).sum() / np.abs(b).sum() < 1e-5, part
-        assert np.abs(a - b).max() / np.abs(b).max() < 1e-5, part
+    for method in ("kernel", "window"):
+        new = FastSimulator(scenes, sensor, fidelity="draft", deposit=method).expected(parts=True)
+        for part in ("counts", "object", "direct"):
+            a, b = np.asarray(new[part], np.float64), np.asarray(old[part], np.float64)
+            assert np.abs(b).max() > 0
+            assert np.abs(a - b).sum() / np.abs(b).sum() < 1e-5, (method, part)
+            assert np.abs(a - b).max() / np.abs(b).max() < 1e-5, (method, part)
 
 
 def test_unknown_deposit_is_a_user_error():
-    with pytest.raises(UserError, match="deposit='dense' is not supported; allowed: window, scatter"):
+    with pytest.raises(UserError, match="deposit='dense' is not supported; allowed: kernel, window, scatter"):
         FastSimulator(denali_scene("A", "8in", 0), resolve_sensor("tmf8828-3x3-short"), fidelity="draft",
                       deposit="dense")

@@ -74,9 +74,20 @@ def format_bench_simulate(result: dict) -> str:
         *_model_lines(result.get("models", [])),
         f"machine: {', '.join(mc['jax_devices'])}; {mc['cpu_count']} CPU cores ({mc['processor']}); jax {mc['jax']}, "
         f"numpy {mc['numpy']}; load average {mc['load_average_start']} at start, {mc.get('load_average_end')} at end",
+        _deposit_line(cfg),
         verdict(result),
     ]
     return "\n".join(lines)
+
+
+def _deposit_line(cfg: dict) -> str:
+    """Which deposit the timed levels used (the compiled kernel, or why not)."""
+    kernel = cfg.get("deposit_kernel")
+    if kernel is None:  # a result written before the kernel
+        return f"deposit: {cfg.get('deposit', 'window')}"
+    if kernel["available"]:
+        return f"deposit: {cfg['deposit']} (the compiled kernel, {kernel['why']})"
+    return f"deposit: {cfg['deposit']} (the compiled kernel is not available: {kernel['why']})"
 
 
 def _model_lines(rows: list) -> list[str]:

@@ -30,11 +30,13 @@ from __future__ import annotations
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import partial
 from typing import Iterator
 
 import numpy as np
 
 from nlosplan._jax import jax, jnp
+from nlosplan.sensor_models import deposit_kernel
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import bin_arrivals, pulse_boxes
 from nlosplan.sensor_models.zone_terms import walk_reach_ps
@@ -161,11 +163,18 @@ class TimeGrid:
         return (times_ps - start_offset_ps) / delta - self.first_bin * self.oversample - 0.5
 
 
-#: How :func:`deposit_at` adds the arrivals: ``"window"`` (one scatter-add of both split weights as a
-#: two-node window, the default since issue 20: ~1.5x faster on XLA's CPU backend) or ``"scatter"``
-#: (two scalar scatter-adds, the path before; kept for ``nlosplan bench simulate --baseline``).
-DEPOSIT_METHODS = ("window", "scatter")
+#: How :func:`deposit_at` adds the arrivals: ``"kernel"`` (one compiled C++ loop, an XLA custom call built on
+#: first use: :mod:`~nlosplan.sensor_models.deposit_kernel`; the fast simulator's default where it builds),
+#: ``"window"`` (one scatter-add of both split weights as a two-node window, the XLA default since issue 20) or
+#: ``"scatter"`` (two scalar scatter-adds, the path before; kept for ``nlosplan bench simulate --baseline``).
+#: All three give the same sums up to float summation order, and the same derivatives.
+DEPOSIT_METHODS = ("kernel", "window", "scatter")
 _DEPOSIT_METHOD = ["window"]
+
+
+def default_deposit() -> str:
+    """The fastest deposit this process can run: ``"kernel"`` where it builds and loads, else ``"window"``."""
+    return "kernel" if deposit_kernel.available() else "window"
 
 
 @contextmanager
@@ -180,16 +189,49 @@ def deposit_method(name: str) -> Iterator[None]:
         _DEPOSIT_METHOD[0] = old
 
 
-def _deposit_window(i0, f, w, r, n_rows: int, n_nodes: int):
-    """Both split weights in one scatter-add of 2-node windows; rows padded by two guard nodes each side."""
-    width = n_nodes + 4  # node k at column k + 2; columns 0, 1 and the last two catch off-grid arrivals
+def _window_add(i0, r, lo, hi, n_rows: int, n_nodes: int):
+    """Add ``lo`` at node ``i0`` and ``hi`` at ``i0 + 1`` of row ``r`` in one scatter-add of 2-node windows.
+
+    Rows are padded by two guard nodes each side (node ``k`` at column ``k + 2``; ``i0`` clipped to
+    ``[-2, n_nodes + 1]``), which catch the off-grid halves and are cut away.
+    """
+    width = n_nodes + 4
     idx = (r * width + i0 + 2)[:, None]
-    upd = jnp.stack([w * (1.0 - f), w * f], -1)
+    upd = jnp.stack([lo, hi], -1)
     dn = jax.lax.ScatterDimensionNumbers(update_window_dims=(1,), inserted_window_dims=(),
                                          scatter_dims_to_operand_dims=(0,))
-    out = jnp.zeros((n_rows * width + 1,), w.dtype)  # +1: the window of the last guard column
+    out = jnp.zeros((n_rows * width + 1,), lo.dtype)  # +1: the window of the last guard column
     out = jax.lax.scatter_add(out, idx, upd, dn, mode=jax.lax.GatherScatterMode.FILL_OR_DROP)
     return out[: n_rows * width].reshape(n_rows, width)[:, 2:-2]
+
+
+def _split(p, n_nodes: int):
+    """``(i0, f)``: the first node of each arrival (clipped to ``[-2, n_nodes + 1]``, int32) and its fraction."""
+    i0f = jnp.floor(p)
+    # clip before the integer cast so far-off arrivals cannot overflow int32
+    return jnp.clip(i0f, -2, n_nodes + 1).astype(jnp.int32), p - i0f
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(3, 4))
+def _kernel_deposit(p, w, r, n_rows, n_nodes):
+    """The compiled deposit (:func:`~nlosplan.sensor_models.deposit_kernel.call`) with its derivative.
+
+    The map is linear in the weights and piecewise linear in the positions; its tangent is the deposit
+    of ``dw (1 - f) - w dp`` and ``dw f + w dp`` on the same two nodes, traced as the XLA scatter-add so
+    that reverse mode can transpose it (``grad`` and ``jacfwd`` see the same derivative as the XLA paths).
+    ``n_rows``/``n_nodes`` arrive as Python ints (static).
+    """
+    return deposit_kernel.call(p, w, r, n_rows, n_nodes)
+
+
+@_kernel_deposit.defjvp
+def _kernel_deposit_jvp(n_rows, n_nodes, primals, tangents):
+    p, w, r = primals
+    dp, dw, _ = tangents
+    out = _kernel_deposit(p, w, r, n_rows, n_nodes)
+    p, w, r, dp, dw = (jnp.ravel(a) for a in (p, w, r, dp, dw))
+    i0, f = _split(p, n_nodes)
+    return out, _window_add(i0, r, dw * (1.0 - f) - w * dp, dw * f + w * dp, n_rows, n_nodes)
 
 
 def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
@@ -197,11 +239,12 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
 
     Parameters
     ----------
-    positions : array, shape (N,)
-        Fractional node coordinates (node ``k`` at ``k``).
-    weights : array, shape (N,)
-    rows : array of int, shape (N,) or None
-        Row of each arrival (``None``: all in row 0).
+    positions : array, shape (...)
+        Fractional node coordinates (node ``k`` at ``k``), any shape (e.g. samples x cells).
+    weights : array, shape (...)
+        Broadcast to the positions' shape.
+    rows : array of int, shape (...) or None
+        Row of each arrival, broadcast to the positions' shape (``None``: all in row 0).
     n_rows, n_nodes : int
         Output shape.
 
@@ -214,18 +257,26 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     -----
     An arrival at ``p`` puts ``1 - f`` on node ``floor(p)`` and ``f`` on the
     next (``f = p - floor(p)``), preserving its weight and mean time exactly.
-    The method (one windowed scatter-add or two scalar ones, equal up to the
-    float summation order) is chosen with :func:`deposit_method` at trace time.
+    The method (the compiled kernel, one windowed scatter-add or two scalar
+    ones, equal up to the float summation order) is chosen with
+    :func:`deposit_method` at trace time.
     """
+    if _DEPOSIT_METHOD[0] == "kernel":
+        # not raveled: a flat view of a broadcast (M, N) product makes XLA's fused loop compute a 2-D index
+        # per element (a division), ~2x slower than the loop over the array as it is; the kernel reads the
+        # buffers flat either way
+        dtype = jnp.result_type(positions, weights)
+        p = jnp.asarray(positions, dtype)
+        w = jnp.broadcast_to(jnp.asarray(weights, dtype), p.shape)
+        r = jnp.zeros(p.shape, jnp.int32) if rows is None else jnp.broadcast_to(jnp.asarray(rows, jnp.int32), p.shape)
+        return _kernel_deposit(p, w, r, int(n_rows), int(n_nodes)).astype(jnp.result_type(weights))
     p = jnp.ravel(positions)
-    w = jnp.ravel(weights)
-    i0f = jnp.floor(p)
-    f = p - i0f
-    # clip before the integer cast so far-off arrivals cannot overflow int32
-    i0 = jnp.clip(i0f, -2, n_nodes + 1).astype(jnp.int32)
-    r = jnp.zeros_like(i0) if rows is None else jnp.ravel(jnp.asarray(rows, jnp.int32))
+    w = jnp.ravel(jnp.broadcast_to(weights, jnp.shape(positions)))
+    i0, f = _split(p, n_nodes)
+    r = jnp.zeros_like(i0) if rows is None else jnp.ravel(jnp.broadcast_to(jnp.asarray(rows, jnp.int32),
+                                                                           jnp.shape(positions)))
     if _DEPOSIT_METHOD[0] == "window":
-        return _deposit_window(i0, f, w, r, n_rows, n_nodes)
+        return _window_add(i0, r, w * (1.0 - f), w * f, n_rows, n_nodes)
     big = n_rows * n_nodes  # out of range: mode="drop" discards it
     idx0 = jnp.where((i0 >= 0) & (i0 < n_nodes), r * n_nodes + i0, big)
     idx1 = jnp.where((i0 + 1 >= 0) & (i0 + 1 < n_nodes), r * n_nodes + i0 + 1, big)

@@ -16,7 +16,7 @@ from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
-from nlosplan.sensor_models.transient import DEPOSIT_METHODS, deposit_method
+from nlosplan.sensor_models.transient import DEPOSIT_METHODS, default_deposit, deposit_method
 from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms
 from nlosplan.simulators.scene import Scene
 
@@ -153,10 +153,12 @@ class FastSimulator:
         iterations, ambient, dark and crosstalk); ``sensor`` is ignored then.
     chunk : int
         Scenes per compiled batch call (memory bound).
-    deposit : {"window", "scatter"}
+    deposit : {"kernel", "window", "scatter"}, optional
         How arrivals are added onto the node grid (:data:`~nlosplan.sensor_models.transient.DEPOSIT_METHODS`):
-        one windowed scatter-add (default) or the two scalar ones of before issue 20 (``bench simulate
-        --baseline``); equal up to float summation order.
+        the compiled C++ loop (:mod:`~nlosplan.sensor_models.deposit_kernel`, built on first use), one
+        windowed XLA scatter-add, or the two scalar ones of before issue 20 (``bench simulate --baseline``);
+        equal up to float summation order. Default: the kernel where it builds, else the windowed scatter-add
+        (with a warning that says why).
     cache_chunks : bool
         Build each chunk's parameters once, on the host, and the sensors' terms (impulse-response matrix,
         first bounce, crosstalk) once, and reuse them in every call (default). ``False`` is the path of
@@ -180,7 +182,7 @@ class FastSimulator:
     """
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
-                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str = "window",
+                 prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str | None = None,
                  cache_chunks: bool = True, share: bool = True):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
@@ -191,6 +193,8 @@ class FastSimulator:
         self.dtype = jnp.dtype(str(dtype))
         self.single_scene = isinstance(scenes, Scene)
         self.single_sensor = sensors is None
+        if deposit is None:
+            deposit = default_deposit()
         if deposit not in DEPOSIT_METHODS:
             raise UserError(f"deposit={deposit!r} is not supported; allowed: {', '.join(DEPOSIT_METHODS)}")
         self.plan: SimPlan = build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune)

@@ -176,8 +176,7 @@ def _retro(st, a, p, grid, bw, t0):
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
     n1 = a["a1"].shape[0]
-    rows = jnp.broadcast_to(jnp.arange(n1)[None], w.shape)
-    per_cell = deposit_at(pos, w, rows, n1, st.n_r)  # (N1, n_r)
+    per_cell = deposit_at(pos, w, jnp.arange(n1)[None], n1, st.n_r)  # (N1, n_r)
     # lobe spread at the centroid of the samples that see the wall (independent of which cells are kept)
     sees = jnp.max((a["wall_corners"][None] - x[:, None]) @ n[:, :, None], axis=(1, 2)) > 0
     seen_area = p["areas"] * (sees & ((x - a["w0"]) @ a["n_w"] > 0))

@@ -1,0 +1,86 @@
+// nlosplan: the arrival-time deposit of nlosplan.sensor_models.transient.deposit_at as an XLA FFI handler (CPU).
+//
+// Each arrival k (fractional node position p[k], weight w[k], row r[k]) puts (1 - f) w[k] on node floor(p[k]) and
+// f w[k] on the next node of its row (f = p[k] - floor(p[k])); nodes off the grid and rows out of range are dropped.
+// One pass over the arrivals in order: the same sums as XLA's scatter-add, without its per-update index checks,
+// update windows and materialized update arrays.
+//
+// Shapes: p, w, r (B, N) with B >= 1 leading batch entries (vmap), out (B, n_rows, n_nodes). Built on first use by
+// nlosplan/sensor_models/deposit_kernel.py with the C++ compiler and the headers shipped in jaxlib.
+#include <cstdint>
+#include <cstring>
+
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace {
+
+template <typename T>
+void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, int64_t n, int64_t n_rows,
+             int64_t n_nodes) {
+  const int64_t plane = n_rows * n_nodes;
+  std::memset(out, 0, sizeof(T) * static_cast<size_t>(batch * plane));
+  const T last = static_cast<T>(n_nodes);
+  for (int64_t b = 0; b < batch; ++b) {
+    const T* pb = p + b * n;
+    const T* wb = w + b * n;
+    const int32_t* rb = r + b * n;
+    T* ob = out + b * plane;
+    for (int64_t k = 0; k < n; ++k) {
+      const T wk = wb[k];
+      const T pk = pb[k];
+      const int64_t row = rb[k];
+      // NaN positions fail both comparisons and are dropped, as off-grid arrivals are
+      if (wk == T(0) || !(pk > T(-1) && pk < last) || row < 0 || row >= n_rows) continue;
+      // floor without a libm call (x86-64 before SSE4.1 has no rounding instruction): truncate, then step
+      // down for negative fractions; exact, as every float here is far below 2^53 nodes
+      int64_t i0 = static_cast<int64_t>(pk);
+      i0 -= static_cast<T>(i0) > pk;
+      const T f = pk - static_cast<T>(i0);
+      T* o = ob + row * n_nodes;
+      if (i0 >= 0) o[i0] += wk * (T(1) - f);
+      if (i0 + 1 < n_nodes) o[i0 + 1] += wk * f;
+    }
+  }
+}
+
+ffi::Error DepositImpl(ffi::AnyBuffer p, ffi::AnyBuffer w, ffi::Buffer<ffi::S32> r, ffi::Result<ffi::AnyBuffer> out,
+                       int64_t n_rows, int64_t n_nodes) {
+  const auto type = p.element_type();
+  if (w.element_type() != type || out->element_type() != type) {
+    return ffi::Error::InvalidArgument("nlosplan deposit: positions, weights and output must share one float type");
+  }
+  if (n_rows < 1 || n_nodes < 1) return ffi::Error::InvalidArgument("nlosplan deposit: empty output");
+  const int64_t plane = n_rows * n_nodes;
+  const int64_t total = static_cast<int64_t>(out->element_count());
+  if (total % plane != 0) return ffi::Error::InvalidArgument("nlosplan deposit: output is not (B, n_rows, n_nodes)");
+  const int64_t batch = total / plane;
+  const int64_t count = static_cast<int64_t>(p.element_count());
+  if (count % batch != 0 || static_cast<int64_t>(w.element_count()) != count ||
+      static_cast<int64_t>(r.element_count()) != count) {
+    return ffi::Error::InvalidArgument("nlosplan deposit: positions, weights and rows differ in size");
+  }
+  const int64_t n = count / batch;
+  if (type == ffi::F32) {
+    Deposit(p.typed_data<float>(), w.typed_data<float>(), r.typed_data(), out->typed_data<float>(), batch, n, n_rows,
+            n_nodes);
+  } else if (type == ffi::F64) {
+    Deposit(p.typed_data<double>(), w.typed_data<double>(), r.typed_data(), out->typed_data<double>(), batch, n,
+            n_rows, n_nodes);
+  } else {
+    return ffi::Error::InvalidArgument("nlosplan deposit: float32 or float64 only");
+  }
+  return ffi::Error::Success();
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(NlosplanDeposit, DepositImpl,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::AnyBuffer>()
+                                  .Arg<ffi::Buffer<ffi::S32>>()
+                                  .Ret<ffi::AnyBuffer>()
+                                  .Attr<int64_t>("n_rows")
+                                  .Attr<int64_t>("n_nodes"));

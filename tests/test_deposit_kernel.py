@@ -1,0 +1,139 @@
+"""The compiled deposit kernel: the same sums and derivatives as XLA's scatter-add, and how it is built."""
+
+import os
+import stat
+import warnings
+
+import numpy as np
+import pytest
+
+from nlosplan._jax import jax, jnp
+from nlosplan.sensor_models import deposit_kernel
+from nlosplan.sensor_models.transient import default_deposit, deposit_at, deposit_method
+from nlosplan.simulators import FastSimulator, denali_scene
+from nlosplan.sensor_models.presets import resolve_sensor
+
+
+def _both(fn):
+    out = {}
+    for m in ("kernel", "window"):
+        with deposit_method(m):
+            out[m] = fn()
+    return out
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_kernel_equals_the_scatter_on_a_samples_by_cells_array(dtype):
+    rng = np.random.default_rng(7)
+    m, n, n_nodes = 30, 11, 25
+    pos = jnp.asarray(rng.uniform(-3.0, n_nodes + 3.0, (m, n)), dtype)  # off the grid on both sides
+    pos = pos.at[0, :4].set(jnp.asarray([-1.0, -0.5, n_nodes - 1.0, n_nodes - 0.25], dtype))  # the edges exactly
+    w = jnp.asarray(rng.uniform(-1.0, 1.0, (m, n)), dtype).at[1, 0].set(0.0)
+    rows = jnp.arange(n)[None] % 4  # rows along the last axis, broadcast over the samples
+    out = _both(lambda: np.asarray(jax.jit(lambda p, w: deposit_at(p, w, rows, 4, n_nodes))(pos, w)))
+    assert out["kernel"].dtype == np.dtype(dtype) and out["kernel"].shape == (4, n_nodes)
+    np.testing.assert_allclose(out["kernel"], out["window"], rtol=1e-5 if dtype == "float32" else 1e-12, atol=1e-12)
+    # what lies between the first and the last node keeps its weight and mean position
+    p, wn = np.asarray(pos, np.float64), np.asarray(w, np.float64)
+    inside = (p >= 0) & (p <= n_nodes - 1)
+    with deposit_method("kernel"):
+        grid = np.asarray(deposit_at(pos[inside], w[inside], jnp.broadcast_to(rows, pos.shape)[inside], 4, n_nodes),
+                          np.float64)
+    assert grid.sum() == pytest.approx(wn[inside].sum(), rel=1e-5)
+    assert (grid * np.arange(n_nodes)).sum() == pytest.approx((wn * p)[inside].sum(), rel=1e-5)
+
+
+def test_kernel_drops_nan_positions_and_rows_out_of_range():
+    with deposit_method("kernel"):
+        out = np.asarray(deposit_at(jnp.asarray([jnp.nan, 2.25, 1.0, 1.0]), jnp.asarray([5.0, 1.0, 3.0, 7.0]),
+                                    jnp.asarray([0, 1, -1, 2]), 2, 4))
+    np.testing.assert_array_equal(out, [[0, 0, 0, 0], [0, 0, 0.75, 0.25]])
+
+
+def test_kernel_derivatives_equal_the_scatter_forward_reverse_and_batched():
+    rng = np.random.default_rng(1)
+    pos = jnp.asarray(rng.uniform(-2.0, 22.0, (40, 6)))
+    w = jnp.asarray(rng.uniform(0.1, 1.0, (40, 6)))
+    rows = jnp.arange(6)[None]
+    weight = jnp.asarray(rng.normal(size=(6, 20)))
+
+    def loss(s):
+        return jnp.sum(jnp.sin(deposit_at(pos * s[0] + s[1], w * s[2], rows, 6, 20)) * weight)
+
+    s0 = jnp.asarray([1.0, 0.3, 1.5])
+    grads = _both(lambda: np.asarray(jax.grad(loss)(s0)))
+    jacs = _both(lambda: np.asarray(jax.jacfwd(lambda s: deposit_at(pos * s[0] + s[1], w * s[2], rows, 6, 20))(s0)))
+    hess = _both(lambda: np.asarray(jax.hessian(loss)(s0)))
+    batched = _both(lambda: np.asarray(jax.vmap(lambda p: deposit_at(p, w, rows, 6, 20))(jnp.stack([pos, pos + 2.5]))))
+    assert np.abs(grads["window"]).max() > 0 and np.abs(jacs["window"]).max() > 0
+    for got in (grads, jacs, hess, batched):
+        np.testing.assert_allclose(got["kernel"], got["window"], rtol=1e-10, atol=1e-12)
+    with deposit_method("kernel"):
+        one = np.asarray(deposit_at(pos + 2.5, w, rows, 6, 20))
+    np.testing.assert_allclose(batched["kernel"][1], one, rtol=1e-12)
+
+
+def test_the_simulator_uses_the_kernel_by_default_and_gets_the_same_histograms():
+    assert deposit_kernel.available()  # the test machines have a C++ compiler
+    sensor = resolve_sensor("tmf8828-3x3-short")
+    scenes = [denali_scene("A", "8in", 3, albedo=0.36, diffuse_albedo=0.2), denali_scene("minus", "4in", 60)]
+    sim = FastSimulator(scenes, sensor, fidelity="draft")
+    assert sim.plan.static.deposit == "kernel"
+    got = np.asarray(sim.expected(), np.float64)
+    ref = np.asarray(FastSimulator(scenes, sensor, fidelity="draft", deposit="window").expected(), np.float64)
+    assert np.abs(ref).max() > 0
+    assert np.abs(got - ref).max() / np.abs(ref).max() < 1e-6
+
+
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """A process state that has not looked for the kernel yet, with its own kernel folder."""
+    monkeypatch.setattr(deposit_kernel, "_STATE", {})
+    monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
+    monkeypatch.delenv(deposit_kernel.ENV_SWITCH, raising=False)
+    return tmp_path
+
+
+def test_a_fresh_folder_builds_the_library_once_and_loads_it(fresh, monkeypatch):
+    ok, path = deposit_kernel.status()
+    assert ok and path.startswith(str(fresh / "kernels")) and os.path.getsize(path) > 0
+    assert [p.name for p in (fresh / "kernels").iterdir() if p.suffix == ".tmp"] == []
+    # a second process finds it built: no compiler run
+    monkeypatch.setattr(deposit_kernel, "_STATE", {})
+    monkeypatch.setattr(deposit_kernel, "_build", lambda *a: pytest.fail("rebuilt a library that exists"))
+    assert deposit_kernel.status() == (True, path)
+    with deposit_method("kernel"):
+        out = np.asarray(deposit_at(jnp.asarray([0.5]), jnp.asarray([2.0]), None, 1, 2))
+    np.testing.assert_allclose(out, [[1.0, 1.0]])
+
+
+def test_without_a_compiler_the_scatter_is_used_and_a_warning_says_why(fresh, monkeypatch):
+    monkeypatch.setenv("CXX", str(fresh / "no-such-compiler"))
+    with pytest.warns(RuntimeWarning, match=r"deposit kernel is not available \(no C\+\+ compiler .*XLA's scatter-add"):
+        assert default_deposit() == "window"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per process
+        assert deposit_kernel.status() == (False, "no C++ compiler (set CXX, or install g++ or clang++)")
+    sim = FastSimulator(denali_scene("A", "8in", 0), resolve_sensor("tmf8828-3x3-short"), fidelity="draft")
+    assert sim.plan.static.deposit == "window"
+
+
+def test_a_failing_build_names_the_compiler_error_and_leaves_no_file(fresh, monkeypatch):
+    cxx = fresh / "bad-cxx"
+    cxx.write_text('#!/bin/sh\nif [ "$1" = --version ]; then echo "bad-cxx 1.0"; exit 0; fi\n'
+                   'echo "deposit.cc:1: error: no such header" >&2\nexit 1\n')
+    cxx.chmod(cxx.stat().st_mode | stat.S_IEXEC)
+    monkeypatch.setenv("CXX", str(cxx))
+    with pytest.warns(RuntimeWarning, match="bad-cxx failed: deposit.cc:1: error: no such header"):
+        assert not deposit_kernel.available()
+    assert sorted(p.name for p in (fresh / "kernels").iterdir() if not p.name.endswith(".lock")) == []
+
+
+def test_the_switch_turns_it_off_without_a_warning(fresh, monkeypatch):
+    monkeypatch.setenv(deposit_kernel.ENV_SWITCH, "0")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert default_deposit() == "window"
+    assert deposit_kernel.status() == (False, f"turned off by {deposit_kernel.ENV_SWITCH}=0")
+    with pytest.raises(RuntimeError, match="deposit kernel is not available: turned off"):
+        deposit_kernel.call(jnp.zeros(1), jnp.zeros(1), jnp.zeros(1, jnp.int32), 1, 1)
