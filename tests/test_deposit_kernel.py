@@ -33,6 +33,11 @@ def test_kernel_equals_the_scatter_on_a_samples_by_cells_array(dtype):
     out = _both(lambda: np.asarray(jax.jit(lambda p, w: deposit_at(p, w, rows, 4, n_nodes))(pos, w)))
     assert out["kernel"].dtype == np.dtype(dtype) and out["kernel"].shape == (4, n_nodes)
     np.testing.assert_allclose(out["kernel"], out["window"], rtol=1e-5 if dtype == "float32" else 1e-12, atol=1e-12)
+    # a row for every arrival (some out of range: dropped)
+    full = jnp.asarray(rng.integers(-1, 5, (m, n)))
+    out = _both(lambda: np.asarray(deposit_at(pos, w, full, 4, n_nodes)))
+    assert np.abs(out["window"]).max() > 0
+    np.testing.assert_allclose(out["kernel"], out["window"], rtol=1e-5 if dtype == "float32" else 1e-12, atol=1e-12)
     # what lies between the first and the last node keeps its weight and mean position
     p, wn = np.asarray(pos, np.float64), np.asarray(w, np.float64)
     inside = (p >= 0) & (p <= n_nodes - 1)

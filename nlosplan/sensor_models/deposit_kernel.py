@@ -168,9 +168,10 @@ def call(positions, weights, rows, n_rows: int, n_nodes: int):
 
     Parameters
     ----------
-    positions, weights : array, shape (N,)
+    positions, weights : array, shape (..., L)
         Fractional node coordinates and weights, one float dtype.
-    rows : array of int32, shape (N,)
+    rows : array of int32, shape (..., L) or (L,)
+        The row of each arrival, or of each position along the last axis (the same for every leading index).
     n_rows, n_nodes : int
 
     Returns

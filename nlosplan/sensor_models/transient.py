@@ -216,6 +216,8 @@ def _split(p, n_nodes: int):
 def _kernel_deposit(p, w, r, n_rows, n_nodes):
     """The compiled deposit (:func:`~nlosplan.sensor_models.deposit_kernel.call`) with its derivative.
 
+    ``p`` and ``w`` share one shape; ``r`` has it too, or is the rows of the last axis (repeated).
+
     The map is linear in the weights and piecewise linear in the positions; its tangent is the deposit
     of ``dw (1 - f) - w dp`` and ``dw f + w dp`` on the same two nodes, traced as the XLA scatter-add so
     that reverse mode can transpose it (``grad`` and ``jacfwd`` see the same derivative as the XLA paths).
@@ -229,6 +231,7 @@ def _kernel_deposit_jvp(n_rows, n_nodes, primals, tangents):
     p, w, r = primals
     dp, dw, _ = tangents
     out = _kernel_deposit(p, w, r, n_rows, n_nodes)
+    r = jnp.broadcast_to(r, p.shape)  # rows passed once for the last axis
     p, w, r, dp, dw = (jnp.ravel(a) for a in (p, w, r, dp, dw))
     i0, f = _split(p, n_nodes)
     return out, _window_add(i0, r, dw * (1.0 - f) - w * dp, dw * f + w * dp, n_rows, n_nodes)
@@ -268,7 +271,12 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
         dtype = jnp.result_type(positions, weights)
         p = jnp.asarray(positions, dtype)
         w = jnp.broadcast_to(jnp.asarray(weights, dtype), p.shape)
-        r = jnp.zeros(p.shape, jnp.int32) if rows is None else jnp.broadcast_to(jnp.asarray(rows, jnp.int32), p.shape)
+        if rows is None:
+            r = jnp.zeros(p.shape[-1:], jnp.int32)
+        elif p.ndim and jnp.shape(rows)[-1:] == p.shape[-1:] and all(d == 1 for d in jnp.shape(rows)[:-1]):
+            r = jnp.ravel(jnp.asarray(rows, jnp.int32))  # rows along the last axis only: passed once, repeated
+        else:
+            r = jnp.broadcast_to(jnp.asarray(rows, jnp.int32), p.shape)
         return _kernel_deposit(p, w, r, int(n_rows), int(n_nodes)).astype(jnp.result_type(weights))
     p = jnp.ravel(positions)
     w = jnp.ravel(jnp.broadcast_to(weights, jnp.shape(positions)))

@@ -5,7 +5,9 @@
 // One pass over the arrivals in order: the same sums as XLA's scatter-add, without its per-update index checks,
 // update windows and materialized update arrays.
 //
-// Shapes: p, w, r (B, N) with B >= 1 leading batch entries (vmap), out (B, n_rows, n_nodes). Built on first use by
+// Shapes: p, w (B, N) with B >= 1 leading batch entries (vmap); r (B, N), or (B, L) with N a multiple of L for
+// rows that repeat with period L (the last axis of a samples x cells array: row = r[k mod L]); out (B, n_rows,
+// n_nodes). Built on first use by
 // nlosplan/sensor_models/deposit_kernel.py with the C++ compiler and the headers shipped in jaxlib.
 #include <cstdint>
 #include <cstring>
@@ -17,30 +19,39 @@ namespace ffi = xla::ffi;
 namespace {
 
 template <typename T>
-void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, int64_t n, int64_t n_rows,
-             int64_t n_nodes) {
+void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, int64_t n, int64_t period,
+             int64_t n_rows, int64_t n_nodes) {
   const int64_t plane = n_rows * n_nodes;
   std::memset(out, 0, sizeof(T) * static_cast<size_t>(batch * plane));
+  const T inner = static_cast<T>(n_nodes - 1);
   const T last = static_cast<T>(n_nodes);
   for (int64_t b = 0; b < batch; ++b) {
     const T* pb = p + b * n;
     const T* wb = w + b * n;
-    const int32_t* rb = r + b * n;
+    const int32_t* rb = r + b * period;
     T* ob = out + b * plane;
-    for (int64_t k = 0; k < n; ++k) {
-      const T wk = wb[k];
-      const T pk = pb[k];
-      const int64_t row = rb[k];
-      // NaN positions fail both comparisons and are dropped, as off-grid arrivals are
-      if (wk == T(0) || !(pk > T(-1) && pk < last) || row < 0 || row >= n_rows) continue;
-      // floor without a libm call (x86-64 before SSE4.1 has no rounding instruction): truncate, then step
-      // down for negative fractions; exact, as every float here is far below 2^53 nodes
-      int64_t i0 = static_cast<int64_t>(pk);
-      i0 -= static_cast<T>(i0) > pk;
-      const T f = pk - static_cast<T>(i0);
-      T* o = ob + row * n_nodes;
-      if (i0 >= 0) o[i0] += wk * (T(1) - f);
-      if (i0 + 1 < n_nodes) o[i0 + 1] += wk * f;
+    for (int64_t start = 0; start < n; start += period) {  // once when every arrival has its own row
+      for (int64_t i = 0; i < period; ++i) {
+        const T wk = wb[start + i];
+        const T pk = pb[start + i];
+        const int64_t row = rb[i];
+        const bool row_ok = static_cast<uint64_t>(row) < static_cast<uint64_t>(n_rows);
+        // No test of the weight: zero weights (samples facing away) are common and unpredictable, and a
+        // mispredicted branch costs more than adding zeros (2-3x on DENALI scenes).
+        if (__builtin_expect((pk >= T(0)) & (pk < inner) & row_ok, 1)) {  // both nodes on the grid
+          const int64_t i0 = static_cast<int64_t>(pk);  // truncation is the floor here
+          const T f = pk - static_cast<T>(i0);
+          T* o = ob + row * n_nodes + i0;
+          o[0] += wk * (T(1) - f);
+          o[1] += wk * f;
+        } else if ((pk > T(-1)) & (pk < last) & row_ok) {  // one node on the grid (NaN fails both tests)
+          const int64_t i0 = pk < T(0) ? -1 : n_nodes - 1;
+          const T f = pk - static_cast<T>(i0);
+          T* o = ob + row * n_nodes;
+          if (i0 >= 0) o[i0] += wk * (T(1) - f);
+          if (i0 + 1 < n_nodes) o[i0 + 1] += wk * f;
+        }
+      }
     }
   }
 }
@@ -57,17 +68,22 @@ ffi::Error DepositImpl(ffi::AnyBuffer p, ffi::AnyBuffer w, ffi::Buffer<ffi::S32>
   if (total % plane != 0) return ffi::Error::InvalidArgument("nlosplan deposit: output is not (B, n_rows, n_nodes)");
   const int64_t batch = total / plane;
   const int64_t count = static_cast<int64_t>(p.element_count());
-  if (count % batch != 0 || static_cast<int64_t>(w.element_count()) != count ||
-      static_cast<int64_t>(r.element_count()) != count) {
+  const int64_t n = count / batch;
+  if (n == 0) {
+    std::memset(out->untyped_data(), 0, out->size_bytes());
+    return ffi::Error::Success();
+  }
+  const int64_t period = static_cast<int64_t>(r.element_count()) / batch;
+  if (count % batch != 0 || static_cast<int64_t>(w.element_count()) != count || period < 1 || n % period != 0 ||
+      static_cast<int64_t>(r.element_count()) != period * batch) {
     return ffi::Error::InvalidArgument("nlosplan deposit: positions, weights and rows differ in size");
   }
-  const int64_t n = count / batch;
   if (type == ffi::F32) {
-    Deposit(p.typed_data<float>(), w.typed_data<float>(), r.typed_data(), out->typed_data<float>(), batch, n, n_rows,
-            n_nodes);
+    Deposit(p.typed_data<float>(), w.typed_data<float>(), r.typed_data(), out->typed_data<float>(), batch, n, period,
+            n_rows, n_nodes);
   } else if (type == ffi::F64) {
     Deposit(p.typed_data<double>(), w.typed_data<double>(), r.typed_data(), out->typed_data<double>(), batch, n,
-            n_rows, n_nodes);
+            period, n_rows, n_nodes);
   } else {
     return ffi::Error::InvalidArgument("nlosplan deposit: float32 or float64 only");
   }
