@@ -123,6 +123,19 @@ def test_without_a_compiler_the_scatter_is_used_and_a_warning_says_why(fresh, mo
     assert sim.plan.static.deposit == "window"
 
 
+def test_a_plan_made_for_the_kernel_runs_where_it_cannot_be_built(fresh, monkeypatch):
+    """A plan built where the kernel loads, run in a process without a compiler (a remote worker)."""
+    sensor = resolve_sensor("tmf8828-3x3-short")
+    scene = denali_scene("S", "4in", 12)
+    ref = np.asarray(FastSimulator(scene, sensor, fidelity="draft", deposit="window").expected())
+    jax.clear_caches()  # trace again, in the "worker"
+    monkeypatch.setattr(deposit_kernel, "_STATE", {})
+    monkeypatch.setenv("CXX", str(fresh / "no-such-compiler"))
+    with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
+        got = np.asarray(FastSimulator(scene, sensor, fidelity="draft", deposit="kernel").expected())
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
+
+
 def test_a_failing_build_names_the_compiler_error_and_leaves_no_file(fresh, monkeypatch):
     cxx = fresh / "bad-cxx"
     cxx.write_text('#!/bin/sh\nif [ "$1" = --version ]; then echo "bad-cxx 1.0"; exit 0; fi\n'

@@ -264,7 +264,10 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     ones, equal up to the float summation order) is chosen with
     :func:`deposit_method` at trace time.
     """
-    if _DEPOSIT_METHOD[0] == "kernel":
+    method = _DEPOSIT_METHOD[0]
+    if method == "kernel" and not deposit_kernel.available():
+        method = "window"  # a worker process or machine that cannot build it (it warned): the same sums
+    if method == "kernel":
         # not raveled: a flat view of a broadcast (M, N) product makes XLA's fused loop compute a 2-D index
         # per element (a division), ~2x slower than the loop over the array as it is; the kernel reads the
         # buffers flat either way
@@ -283,7 +286,7 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     i0, f = _split(p, n_nodes)
     r = jnp.zeros_like(i0) if rows is None else jnp.ravel(jnp.broadcast_to(jnp.asarray(rows, jnp.int32),
                                                                            jnp.shape(positions)))
-    if _DEPOSIT_METHOD[0] == "window":
+    if method == "window":
         return _window_add(i0, r, w * (1.0 - f), w * f, n_rows, n_nodes)
     big = n_rows * n_nodes  # out of range: mode="drop" discards it
     idx0 = jnp.where((i0 >= 0) & (i0 < n_nodes), r * n_nodes + i0, big)
