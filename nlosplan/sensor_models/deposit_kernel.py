@@ -1,11 +1,12 @@
 """The compiled arrival-time deposit: built on first use, loaded into XLA as a CPU custom call.
 
 :func:`~nlosplan.sensor_models.transient.deposit_at` adds every arrival's
-weight onto two nodes of its row. On XLA's CPU backend a scatter-add of that
-linear map, and the fused loop that builds its update windows, cost about a
-third of a simulated DENALI scene (issue 20's profile, docs/fast-simulator.md);
-the same sums in one C++ loop (``kernels/deposit.cc``, an XLA FFI handler) make
-the fast simulator 1.3-1.4x faster at equal results.
+weight onto two nodes of its row. On XLA's CPU backend the scatter-add of that
+linear map, and above all the fused loop that built its update windows from the
+raveled (samples x cells) arrivals, cost ~3/4 of a simulated DENALI scene
+(issue 20's profile, docs/fast-simulator.md); the same sums in one C++ loop
+(``kernels/deposit.cc``, an XLA FFI handler) over the arrivals in their own
+shape make ``bench simulate`` 2-3.6x faster at equal results.
 
 The source ships with the package and is compiled here, once per machine and
 jaxlib version, against the headers jaxlib ships (``jax.ffi.include_dir()``),
@@ -153,7 +154,7 @@ def status() -> tuple[bool, str]:
         except (_BuildFailed, OSError) as exc:
             _STATE.update(ok=False, reason=str(exc))
             warnings.warn(f"nlosplan: the compiled deposit kernel is not available ({exc}); the fast simulator "
-                          "uses XLA's scatter-add instead (the same results, about 1.3x slower)", RuntimeWarning,
+                          "uses XLA's scatter-add instead (the same results, 2-3x slower)", RuntimeWarning,
                           stacklevel=2)
     return (True, str(_STATE["path"])) if _STATE["ok"] else (False, _STATE["reason"])
 

@@ -268,9 +268,9 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     if method == "kernel" and not deposit_kernel.available():
         method = "window"  # a worker process or machine that cannot build it (it warned): the same sums
     if method == "kernel":
-        # not raveled: a flat view of a broadcast (M, N) product makes XLA's fused loop compute a 2-D index
-        # per element (a division), ~2x slower than the loop over the array as it is; the kernel reads the
-        # buffers flat either way
+        # not raveled: a flat view of a broadcast (M, N) product makes XLA's fused loop that computes the
+        # weights and times find a 2-D index per element (a division), ~10x slower than the loop over the
+        # array as it is (issue 20's profile); the kernel reads the buffers flat either way
         dtype = jnp.result_type(positions, weights)
         p = jnp.asarray(positions, dtype)
         w = jnp.broadcast_to(jnp.asarray(weights, dtype), p.shape)
