@@ -21,6 +21,8 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
+from nlosplan.resources import cache_root
+
 jax.config.update("jax_enable_x64", True)
 
 #: Largest size of the on-disk compilation cache, bytes.
@@ -33,7 +35,7 @@ def compilation_cache_dir() -> Path | None:
         return None
     if jax.config.jax_compilation_cache_dir:
         return Path(jax.config.jax_compilation_cache_dir)
-    return Path(os.environ.get("NLOSPLAN_CACHE") or Path.home() / ".cache" / "nlosplan") / "jax"
+    return cache_root() / "jax"
 
 
 def _use_compilation_cache() -> None:

@@ -1,4 +1,4 @@
-"""What the machine can give a request: memory available, and the range of seeds.
+"""What the machine can give a request: memory available, the range of seeds, and where caches live.
 
 Commands estimate the memory a request needs from its sizes (zones x bins x
 repeats, draws, scenes) before any work and refuse it with one line when it
@@ -15,12 +15,17 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_SEED", "available_memory", "check_memory", "format_bytes"]
+__all__ = ["MAX_SEED", "available_memory", "cache_root", "check_memory", "format_bytes"]
 
 #: Largest seed every random generator of the project takes (numpy, JAX, torch): seeds are 0..2**32-1.
 MAX_SEED = 2**32 - 1
 
 _GIB = 1024**3
+
+
+def cache_root() -> Path:
+    """``$NLOSPLAN_CACHE`` or ``~/.cache/nlosplan``: the folder of every cache (programs, references, kernels)."""
+    return Path(os.environ.get("NLOSPLAN_CACHE") or Path.home() / ".cache" / "nlosplan")
 
 
 def _meminfo_available() -> int | None:

@@ -106,3 +106,6 @@ def test_key_changes_with_sensor_scenes_and_code(monkeypatch):
     assert k != reference_cache.cache_key(sensor, replace(cfg.scenes, fidelity="low"))
     monkeypatch.setattr(reference_cache, "code_version", lambda: "edited")
     assert k != reference_cache.cache_key(sensor, cfg.scenes)
+    # the compiled deposit kernel's source is code the references depend on
+    names = [f.name for f in reference_cache.code_files()]
+    assert "deposit.cc" in names and "transport.py" in names and "bounds.py" in names

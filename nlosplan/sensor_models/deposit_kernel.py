@@ -39,6 +39,7 @@ import numpy as np
 from filelock import FileLock
 
 from nlosplan._jax import jax
+from nlosplan.resources import cache_root
 
 #: Name of the XLA custom-call target.
 TARGET = "nlosplan_deposit"
@@ -56,7 +57,7 @@ _REGISTERED: list = []  # the library whose handler XLA holds in this process
 
 def kernel_dir() -> Path:
     """``$NLOSPLAN_CACHE/kernels`` or ``~/.cache/nlosplan/kernels``."""
-    return Path(os.environ.get("NLOSPLAN_CACHE") or Path.home() / ".cache" / "nlosplan") / "kernels"
+    return cache_root() / "kernels"
 
 
 def _disabled() -> bool:
@@ -83,7 +84,7 @@ def _compiler_id(cxx: str) -> str:
 
 
 class _BuildFailed(Exception):
-    pass
+    """The kernel cannot be built or loaded here; the message says why (shown in the fallback's warning)."""
 
 
 def library_path(cxx: str) -> Path:

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
 from nlosplan.files import atomic_path, write_text
+from nlosplan.resources import cache_root
 
 #: Source folders and files (relative to the package) whose code the references depend on.
 CODE_PATHS = ("simulators", "sensor_models", "denali", "planner/design/data.py", "tasks/bounds.py", "constants.py",
@@ -34,21 +34,27 @@ CODE_PATHS = ("simulators", "sensor_models", "denali", "planner/design/data.py",
 
 def cache_dir() -> Path:
     """``$NLOSPLAN_CACHE/references`` or ``~/.cache/nlosplan/references``."""
-    root = os.environ.get("NLOSPLAN_CACHE") or Path.home() / ".cache" / "nlosplan"
-    return Path(root) / "references"
+    return cache_root() / "references"
+
+
+def code_files() -> list[Path]:
+    """The source files in :data:`CODE_PATHS`: ``*.py`` and the compiled kernels' ``*.cc``, sorted by path."""
+    pkg = Path(__file__).resolve().parents[2]
+    out = []
+    for rel in CODE_PATHS:
+        p = pkg / rel
+        out += sorted([*p.rglob("*.py"), *p.rglob("*.cc")]) if p.is_dir() else [p] if p.is_file() else []
+    return out
 
 
 @lru_cache(maxsize=1)
 def code_version() -> str:
-    """SHA-256 (16 hex digits) of the source files in :data:`CODE_PATHS` (``*.py``, sorted by path)."""
+    """SHA-256 (16 hex digits) of :func:`code_files` (their paths in the package and contents)."""
     pkg = Path(__file__).resolve().parents[2]
     h = hashlib.sha256()
-    for rel in CODE_PATHS:
-        p = pkg / rel
-        files = sorted(p.rglob("*.py")) if p.is_dir() else [p] if p.is_file() else []
-        for f in files:
-            h.update(str(f.relative_to(pkg)).encode())
-            h.update(f.read_bytes())
+    for f in code_files():
+        h.update(str(f.relative_to(pkg)).encode())
+        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 
