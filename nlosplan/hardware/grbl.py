@@ -275,7 +275,23 @@ class Grbl(GrblLink):
         self.send(f"G90 G21 G1 X{x:.3f} Y{y:.3f} F{feed:.0f}")
         if not wait:
             return None
-        return self._position(self.wait_idle(context=f"moving to ({x:.3f}, {y:.3f}) mm"))
+        context = f"moving to ({x:.3f}, {y:.3f}) mm"
+        pos = self._position(self.wait_idle(context=context))
+        # GRBL may still report Idle right after the move's 'ok', before the block starts (seen with the real
+        # firmware under load): Idle away from the target is polled again, for at most START_WAIT_S
+        give_up = time.monotonic() + self.START_WAIT_S
+        while not self._reached(pos.xy_mm, (x, y)) and time.monotonic() < give_up:
+            time.sleep(self.poll_s)
+            pos = self._position(self.wait_idle(context=context))
+        return pos
+
+    #: Longest wait (s) for a move to start when GRBL still reports Idle away from the target after its 'ok'.
+    START_WAIT_S = 1.0
+
+    def _reached(self, xy, target) -> bool:
+        """Within half a step (``$100``/``$101``) plus 0.01 mm of ``target`` on both axes."""
+        tol = [0.01 + 0.5 / self.settings.get(k, 1e9) for k in (100, 101)]
+        return all(abs(a - b) <= t for a, b, t in zip(xy, target, tol))
 
     def where(self) -> GantryPosition:
         """The reported position now, in the user frame (and raw MPos/WCO)."""
