@@ -3,6 +3,7 @@
 import argparse
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -57,10 +58,12 @@ def test_json_has_the_required_keys_and_types(run):
     assert result["reference"]["half_knobs"]["object_samples"] == SMALL_REFERENCE.object_samples // 2
     assert result["config"]["positions"] == list(range(6)) and result["config"]["reference_positions"] == [0]
     assert result["machine"]["cpu_count"] >= 1 and result["machine"]["jax_devices"]
-    # the levels ran with the compiled deposit (the test machines have a C++ compiler), and the run says so
-    kernel = result["config"]["deposit_kernel"]
+    # the levels ran with the compiled kernels (the test machines have a C++ compiler) on the usable cores'
+    # threads, and the run says so
+    kernel, threads = result["config"]["kernels"], result["config"]["threads"]
     assert result["config"]["deposit"] == "kernel" and kernel["available"] and kernel["why"].endswith(".so")
-    assert f"deposit: kernel (the compiled kernel, {kernel['why']})" in run[1]
+    assert threads == len(os.sched_getaffinity(0)) or "NLOSPLAN_SIM_THREADS" in os.environ
+    assert f"deposit: kernel (the compiled kernels, {kernel['why']}); chunks on {threads} thread(s)" in run[1]
     assert len(steps) == bench.bench_steps(LEVELS, (0,), MODELS, baseline=True) and all(isinstance(s, str) and s for s in steps)
     json.dumps(result, allow_nan=False)  # strict JSON: no NaN or infinity
 

@@ -26,6 +26,42 @@ def test_chunked_batch_equals_one_call():
     np.testing.assert_allclose(a, b, rtol=1e-6)
 
 
+def test_chunks_on_threads_equal_one_thread_in_order_with_progress():
+    scenes = [denali_scene("S", "4in", p, albedo=0.36, diffuse_albedo=0.2) for p in range(0, 70, 10)]
+    one = FastSimulator(scenes, S3, fidelity=FID, chunk=2, threads=1).expected()
+    sim = FastSimulator(scenes, S3, fidelity=FID, chunk=2, threads=3)
+    steps = []
+    first = sim.expected(progress=lambda done, total: steps.append((done, total)))
+    again = sim.expected(parts=True)["counts"]  # warm now: every chunk on the pool
+    assert steps == [(2, 7), (4, 7), (6, 7), (7, 7)]
+    assert np.abs(one).max() > 0 and len({float(x.sum()) for x in one}) == 7  # seven different scenes
+    np.testing.assert_array_equal(first, one)
+    np.testing.assert_array_equal(again, one)
+
+
+def test_thread_count_from_the_environment(monkeypatch):
+    from nlosplan.planner.design.workers import init_worker
+    from nlosplan.simulators.fast.simulator import THREADS_ENV, default_threads
+
+    monkeypatch.setenv(THREADS_ENV, "3")
+    assert default_threads() == 3 and FastSimulator(denali_scene(), S3, fidelity=FID).threads == 3
+    for bad, msg in (("two", "is not a whole number"), ("0", "at least 1 thread")):
+        monkeypatch.setenv(THREADS_ENV, bad)
+        with pytest.raises(UserError, match=f"{THREADS_ENV}='{bad}'.*{msg}"):
+            default_threads()
+    monkeypatch.delenv(THREADS_ENV)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1, 5})
+    assert default_threads() == 3
+    with pytest.raises(UserError, match="threads=0: at least 1"):
+        FastSimulator(denali_scene(), S3, fidelity=FID, threads=0)
+    monkeypatch.setattr("threadpoolctl.threadpool_limits", lambda n: None)  # keep this test process's threads
+    monkeypatch.setattr("torch.set_num_threads", lambda n: None)
+    monkeypatch.setenv("OMP_NUM_THREADS", "")
+    monkeypatch.delenv("OMP_NUM_THREADS")  # restored after the test, like THREADS_ENV
+    init_worker()  # a design worker: one thread (the pool runs one worker per core)
+    assert default_threads() == 1
+
+
 def test_batch_over_sensors_equals_separate_sensors():
     scene = denali_scene("A", "8in", 19, lights="on")
     sensors = [S3.replace(jitter_fwhm_ps=j, photon_scale=k) for j, k in ((0.0, 2.0), (150.0, 1.0), (400.0, 3.0))]

@@ -81,13 +81,14 @@ def format_bench_simulate(result: dict) -> str:
 
 
 def _deposit_line(cfg: dict) -> str:
-    """Which deposit the timed levels used (the compiled kernel, or why not)."""
-    kernel = cfg.get("deposit_kernel")
+    """Which deposit the timed levels used (the compiled kernels, or why not) and on how many threads."""
+    kernel = cfg.get("kernels", cfg.get("deposit_kernel"))  # the key of results written before the sum-convolution
+    threads = f"; chunks on {cfg['threads']} thread(s)" if "threads" in cfg else ""
     if kernel is None:  # a result written before the kernel
-        return f"deposit: {cfg.get('deposit', 'window')}"
+        return f"deposit: {cfg.get('deposit', 'window')}{threads}"
     if kernel["available"]:
-        return f"deposit: {cfg['deposit']} (the compiled kernel, {kernel['why']})"
-    return f"deposit: {cfg['deposit']} (the compiled kernel is not available: {kernel['why']})"
+        return f"deposit: {cfg['deposit']} (the compiled kernels, {kernel['why']}){threads}"
+    return f"deposit: {cfg['deposit']} (the compiled kernels are not available: {kernel['why']}){threads}"
 
 
 def _model_lines(rows: list) -> list[str]:

@@ -28,15 +28,16 @@ response width, so it is differentiable in them.
 from __future__ import annotations
 
 import math
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import partial
-from typing import Iterator
+from typing import Any, Iterator, NamedTuple
 
 import numpy as np
 
 from nlosplan._jax import jax, jnp
-from nlosplan.sensor_models import deposit_kernel
+from nlosplan.sensor_models import compiled
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import bin_arrivals, pulse_boxes
 from nlosplan.sensor_models.zone_terms import walk_reach_ps
@@ -164,17 +165,25 @@ class TimeGrid:
 
 
 #: How :func:`deposit_at` adds the arrivals: ``"kernel"`` (one compiled C++ loop, an XLA custom call built on
-#: first use: :mod:`~nlosplan.sensor_models.deposit_kernel`; the fast simulator's default where it builds),
+#: first use: :mod:`~nlosplan.sensor_models.compiled`; the fast simulator's default where it builds),
 #: ``"window"`` (one scatter-add of both split weights as a two-node window, the XLA default since issue 20) or
 #: ``"scatter"`` (two scalar scatter-adds, the path before; kept for ``nlosplan bench simulate --baseline``).
 #: All three give the same sums up to float summation order, and the same derivatives.
 DEPOSIT_METHODS = ("kernel", "window", "scatter")
-_DEPOSIT_METHOD = ["window"]
+
+
+class _Method(threading.local):
+    """The method :func:`deposit_at` traces with, per thread (simulators trace in their callers' threads)."""
+
+    name = "window"
+
+
+_DEPOSIT_METHOD = _Method()
 
 
 def default_deposit() -> str:
     """The fastest deposit this process can run: ``"kernel"`` where it builds and loads, else ``"window"``."""
-    return "kernel" if deposit_kernel.available() else "window"
+    return "kernel" if compiled.available() else "window"
 
 
 @contextmanager
@@ -182,11 +191,11 @@ def deposit_method(name: str) -> Iterator[None]:
     """Trace :func:`deposit_at` calls inside the block with method ``name`` (see :data:`DEPOSIT_METHODS`)."""
     if name not in DEPOSIT_METHODS:
         raise ValueError(f"deposit method {name!r} is not one of {DEPOSIT_METHODS}")
-    old, _DEPOSIT_METHOD[0] = _DEPOSIT_METHOD[0], name
+    old, _DEPOSIT_METHOD.name = _DEPOSIT_METHOD.name, name
     try:
         yield
     finally:
-        _DEPOSIT_METHOD[0] = old
+        _DEPOSIT_METHOD.name = old
 
 
 def _window_add(i0, r, lo, hi, n_rows: int, n_nodes: int):
@@ -212,26 +221,56 @@ def _split(p, n_nodes: int):
     return jnp.clip(i0f, -2, n_nodes + 1).astype(jnp.int32), p - i0f
 
 
-@partial(jax.custom_jvp, nondiff_argnums=(3, 4))
-def _kernel_deposit(p, w, r, n_rows, n_nodes):
-    """The compiled deposit (:func:`~nlosplan.sensor_models.deposit_kernel.call`) with its derivative.
+class RowPattern(NamedTuple):
+    """Rows of arrivals that follow the arrival array's blocks, without materializing them.
 
-    ``p`` and ``w`` share one shape; ``r`` has it too, or is the rows of the last axis (repeated).
+    Arrival ``[..., j]`` of block ``b`` (the flat index over all but the last axis) is in row
+    ``b * step + cells[j]``: for samples x cells arrivals, one row per sample is ``RowPattern(zeros, 1)``,
+    one per cell ``RowPattern(arange(N), 0)``, a zone per cell and sample ``RowPattern(zone_of_cell, n_zones)``.
+
+    Attributes
+    ----------
+    cells : array of int, shape (N,)
+        The row offset of each position along the last axis.
+    step : int
+        Rows between consecutive blocks (a Python int).
+    """
+
+    cells: Any
+    step: int
+
+
+def _full_rows(r, step: int, shape):
+    """The row of every arrival, ``shape``, from rows ``r`` (``shape`` itself, or the last axis repeated every
+    block with ``step`` added per block)."""
+    r = jnp.asarray(r, jnp.int32)
+    if r.shape == tuple(shape):
+        return r
+    blocks = math.prod(shape) // r.shape[-1]
+    return ((jnp.arange(blocks, dtype=jnp.int32) * step)[:, None] + r[None, :]).reshape(shape)
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
+def _kernel_deposit(p, w, r, n_rows, n_nodes, step):
+    """The compiled deposit (:func:`~nlosplan.sensor_models.compiled.deposit`) with its derivative.
+
+    ``p`` and ``w`` share one shape; ``r`` has it too, or is the rows of the last axis, repeated every block
+    with ``step`` added per block (see :class:`RowPattern`).
 
     The map is linear in the weights and piecewise linear in the positions; its tangent is the deposit
     of ``dw (1 - f) - w dp`` and ``dw f + w dp`` on the same two nodes, traced as the XLA scatter-add so
     that reverse mode can transpose it (``grad`` and ``jacfwd`` see the same derivative as the XLA paths).
-    ``n_rows``/``n_nodes`` arrive as Python ints (static).
+    ``n_rows``/``n_nodes``/``step`` arrive as Python ints (static).
     """
-    return deposit_kernel.call(p, w, r, n_rows, n_nodes)
+    return compiled.deposit(p, w, r, n_rows, n_nodes, step)
 
 
 @_kernel_deposit.defjvp
-def _kernel_deposit_jvp(n_rows, n_nodes, primals, tangents):
+def _kernel_deposit_jvp(n_rows, n_nodes, step, primals, tangents):
     p, w, r = primals
     dp, dw, _ = tangents
-    out = _kernel_deposit(p, w, r, n_rows, n_nodes)
-    r = jnp.broadcast_to(r, p.shape)  # rows passed once for the last axis
+    out = _kernel_deposit(p, w, r, n_rows, n_nodes, step)
+    r = _full_rows(r, step, p.shape)
     p, w, r, dp, dw = (jnp.ravel(a) for a in (p, w, r, dp, dw))
     i0, f = _split(p, n_nodes)
     return out, _window_add(i0, r, dw * (1.0 - f) - w * dp, dw * f + w * dp, n_rows, n_nodes)
@@ -246,8 +285,9 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
         Fractional node coordinates (node ``k`` at ``k``), any shape (e.g. samples x cells).
     weights : array, shape (...)
         Broadcast to the positions' shape.
-    rows : array of int, shape (...) or None
-        Row of each arrival, broadcast to the positions' shape (``None``: all in row 0).
+    rows : array of int, shape (...), RowPattern or None
+        Row of each arrival, broadcast to the positions' shape, or a :class:`RowPattern` over the positions'
+        blocks (``None``: all in row 0).
     n_rows, n_nodes : int
         Output shape.
 
@@ -264,8 +304,8 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     ones, equal up to the float summation order) is chosen with
     :func:`deposit_method` at trace time.
     """
-    method = _DEPOSIT_METHOD[0]
-    if method == "kernel" and not deposit_kernel.available():
+    method = _DEPOSIT_METHOD.name
+    if method == "kernel" and not compiled.available():
         method = "window"  # a worker process or machine that cannot build it (it warned): the same sums
     if method == "kernel":
         # not raveled: a flat view of a broadcast (M, N) product makes XLA's fused loop that computes the
@@ -274,18 +314,25 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
         dtype = jnp.result_type(positions, weights)
         p = jnp.asarray(positions, dtype)
         w = jnp.broadcast_to(jnp.asarray(weights, dtype), p.shape)
+        step = 0
         if rows is None:
             r = jnp.zeros(p.shape[-1:], jnp.int32)
+        elif isinstance(rows, RowPattern):  # passed once per block: the kernel adds step per block
+            r, step = jnp.asarray(rows.cells, jnp.int32).reshape(p.shape[-1:]), int(rows.step)
         elif p.ndim and jnp.shape(rows)[-1:] == p.shape[-1:] and all(d == 1 for d in jnp.shape(rows)[:-1]):
             r = jnp.ravel(jnp.asarray(rows, jnp.int32))  # rows along the last axis only: passed once, repeated
         else:
             r = jnp.broadcast_to(jnp.asarray(rows, jnp.int32), p.shape)
-        return _kernel_deposit(p, w, r, int(n_rows), int(n_nodes)).astype(jnp.result_type(weights))
+        return _kernel_deposit(p, w, r, int(n_rows), int(n_nodes), step).astype(jnp.result_type(weights))
     p = jnp.ravel(positions)
     w = jnp.ravel(jnp.broadcast_to(weights, jnp.shape(positions)))
     i0, f = _split(p, n_nodes)
-    r = jnp.zeros_like(i0) if rows is None else jnp.ravel(jnp.broadcast_to(jnp.asarray(rows, jnp.int32),
-                                                                           jnp.shape(positions)))
+    if rows is None:
+        r = jnp.zeros_like(i0)
+    elif isinstance(rows, RowPattern):
+        r = jnp.ravel(_full_rows(rows.cells, int(rows.step), jnp.shape(positions)))
+    else:
+        r = jnp.ravel(jnp.broadcast_to(jnp.asarray(rows, jnp.int32), jnp.shape(positions)))
     if method == "window":
         return _window_add(i0, r, w * (1.0 - f), w * f, n_rows, n_nodes)
     big = n_rows * n_nodes  # out of range: mode="drop" discards it
@@ -295,6 +342,60 @@ def deposit_at(positions, weights, rows, n_rows: int, n_nodes: int):
     out = out.at[idx0].add(w * (1.0 - f), mode="drop")
     out = out.at[idx1].add(w * f, mode="drop")
     return out.reshape(n_rows, n_nodes)
+
+
+def _fft_sum_convolve(a, b, fft_len: int):
+    """:func:`sum_convolve` with FFTs of every row (the XLA path)."""
+    fa = jnp.fft.rfft(a, fft_len, axis=-1)
+    fb = jnp.fft.rfft(b, fft_len, axis=-1)
+    return jnp.fft.irfft(jnp.einsum("mf,mzf->zf", fa, fb), fft_len, axis=-1)[:, : a.shape[-1] + b.shape[-1] - 1]
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _kernel_sum_convolve(a, b, fft_len):
+    """The compiled sum-convolution (:func:`~nlosplan.sensor_models.compiled.sum_convolve`) with its derivative.
+
+    The map is bilinear; its tangent ``conv(da, b) + conv(a, db)`` is traced with the FFTs, which reverse
+    mode can transpose.
+    """
+    return compiled.sum_convolve(a, b)
+
+
+@_kernel_sum_convolve.defjvp
+def _kernel_sum_convolve_jvp(fft_len, primals, tangents):
+    a, b = primals
+    da, db = tangents
+    out = _kernel_sum_convolve(a, b, fft_len)
+    return out, _fft_sum_convolve(da, b, fft_len) + _fft_sum_convolve(a, db, fft_len)
+
+
+def sum_convolve(a, b, fft_len: int):
+    """Each sample's two legs convolved along time and summed over the samples.
+
+    Parameters
+    ----------
+    a : array, shape (M, N1)
+        Leg 1 of each sample on the node grid (the light reaching it).
+    b : array, shape (M, Z, N2)
+        Leg 2 of each sample towards each zone on the node grid.
+    fft_len : int
+        FFT length of the XLA path, at least ``N1 + N2 - 1``.
+
+    Returns
+    -------
+    array, shape (Z, N1 + N2 - 1)
+        ``out[z, t] = sum_m sum_u b[m, z, u] a[m, t - u]``.
+
+    Notes
+    -----
+    With :func:`deposit_method` ``"kernel"`` (and the kernels available) this is the compiled loop over the
+    legs' non-zero spans, exact sums; otherwise the FFTs of every row and a spectral product summed over
+    samples (round-off ~1e-7 of the largest value in float32). The derivatives are the FFT path's.
+    """
+    if _DEPOSIT_METHOD.name == "kernel" and compiled.available():
+        dtype = jnp.result_type(a, b)
+        return _kernel_sum_convolve(jnp.asarray(a, dtype), jnp.asarray(b, dtype), int(fft_len))
+    return _fft_sum_convolve(a, b, int(fft_len))
 
 
 def deposit(grid: TimeGrid, times_ps, weights, rows, n_rows: int, *, bin_width_ps, start_offset_ps):

@@ -6,9 +6,10 @@
 // update windows and materialized update arrays.
 //
 // Shapes: p, w (B, N) with B >= 1 leading batch entries (vmap); r (B, N), or (B, L) with N a multiple of L for
-// rows that repeat with period L (the last axis of a samples x cells array: row = r[k mod L]); out (B, n_rows,
-// n_nodes). Built on first use by
-// nlosplan/sensor_models/deposit_kernel.py with the C++ compiler and the headers shipped in jaxlib.
+// rows that follow the blocks of L arrivals (the last axis of a samples x cells array: arrival k is in row
+// (k div L) * step + r[k mod L]; step = 0 repeats the same rows, step = 1 with r = 0 is a row per sample); out
+// (B, n_rows, n_nodes). Built on first use by
+// nlosplan/sensor_models/compiled.py with the C++ compiler and the headers shipped in jaxlib.
 #include <cstdint>
 #include <cstring>
 
@@ -20,7 +21,7 @@ namespace {
 
 template <typename T>
 void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, int64_t n, int64_t period,
-             int64_t n_rows, int64_t n_nodes) {
+             int64_t step, int64_t n_rows, int64_t n_nodes) {
   const int64_t plane = n_rows * n_nodes;
   std::memset(out, 0, sizeof(T) * static_cast<size_t>(batch * plane));
   const T inner = static_cast<T>(n_nodes - 1);
@@ -30,11 +31,11 @@ void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, in
     const T* wb = w + b * n;
     const int32_t* rb = r + b * period;
     T* ob = out + b * plane;
-    for (int64_t start = 0; start < n; start += period) {  // once when every arrival has its own row
+    for (int64_t start = 0, first = 0; start < n; start += period, first += step) {  // once: a row per arrival
       for (int64_t i = 0; i < period; ++i) {
         const T wk = wb[start + i];
         const T pk = pb[start + i];
-        const int64_t row = rb[i];
+        const int64_t row = first + rb[i];
         const bool row_ok = static_cast<uint64_t>(row) < static_cast<uint64_t>(n_rows);
         // No test of the weight: zero weights (samples facing away) are common and unpredictable, and a
         // mispredicted branch costs more than adding zeros (2-3x on DENALI scenes).
@@ -57,7 +58,7 @@ void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, in
 }
 
 ffi::Error DepositImpl(ffi::AnyBuffer p, ffi::AnyBuffer w, ffi::Buffer<ffi::S32> r, ffi::Result<ffi::AnyBuffer> out,
-                       int64_t n_rows, int64_t n_nodes) {
+                       int64_t n_rows, int64_t n_nodes, int64_t step) {
   const auto type = p.element_type();
   if (w.element_type() != type || out->element_type() != type) {
     return ffi::Error::InvalidArgument("nlosplan deposit: positions, weights and output must share one float type");
@@ -80,10 +81,10 @@ ffi::Error DepositImpl(ffi::AnyBuffer p, ffi::AnyBuffer w, ffi::Buffer<ffi::S32>
   }
   if (type == ffi::F32) {
     Deposit(p.typed_data<float>(), w.typed_data<float>(), r.typed_data(), out->typed_data<float>(), batch, n, period,
-            n_rows, n_nodes);
+            step, n_rows, n_nodes);
   } else if (type == ffi::F64) {
     Deposit(p.typed_data<double>(), w.typed_data<double>(), r.typed_data(), out->typed_data<double>(), batch, n,
-            period, n_rows, n_nodes);
+            period, step, n_rows, n_nodes);
   } else {
     return ffi::Error::InvalidArgument("nlosplan deposit: float32 or float64 only");
   }
@@ -99,4 +100,5 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(NlosplanDeposit, DepositImpl,
                                   .Arg<ffi::Buffer<ffi::S32>>()
                                   .Ret<ffi::AnyBuffer>()
                                   .Attr<int64_t>("n_rows")
-                                  .Attr<int64_t>("n_nodes"));
+                                  .Attr<int64_t>("n_nodes")
+                                  .Attr<int64_t>("step"));

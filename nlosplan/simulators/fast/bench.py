@@ -36,9 +36,10 @@ from nlosplan._jax import jax
 from nlosplan.denali import N_POSITIONS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models import deposit_kernel
+from nlosplan.sensor_models import compiled
 from nlosplan.sensor_models.presets import resolve_sensor
 from nlosplan.sensor_models.transient import default_deposit
+from nlosplan.simulators.fast.simulator import default_threads
 from nlosplan.simulators.fast.bench_metrics import (
     CENTROID_MIN_SHARE,
     FLOPS_DEPOSIT,
@@ -255,7 +256,7 @@ def _bench(levels, positions, reference_positions, objects, sizes, sensor_cfg, d
            matmul_n, min_seconds, models, baseline) -> dict:
     """:func:`bench_simulate` on checked arguments."""
     machine = machine_facts()
-    kernel_ok, kernel_why = deposit_kernel.status()
+    kernel_ok, kernel_why = compiled.status()
     t_start = time.perf_counter()
 
     objects, sizes = tuple(objects), tuple(sizes)
@@ -316,7 +317,8 @@ def _bench(levels, positions, reference_positions, objects, sizes, sensor_cfg, d
             "sensor": sensor_cfg.name, "dtype": str(dtype),
             "zones": f"{sensor_cfg.zones_rows}x{sensor_cfg.zones_cols}", "n_bins": sensor_cfg.n_bins,
             "lights": "off", "positions": list(positions), "reference_positions": list(reference_positions),
-            "deposit": default_deposit(), "deposit_kernel": {"available": kernel_ok, "why": kernel_why},
+            "deposit": default_deposit(), "kernels": {"available": kernel_ok, "why": kernel_why},
+            "threads": default_threads(),
             "single_position": single_position, "repeats": int(repeats), "min_seconds": float(min_seconds),
             "timing": "fastest call (at least repeats calls and min_seconds of calling), compile excluded",
             "error_of": "object part (expected - background, before pile-up and saturation)",

@@ -8,6 +8,8 @@ array shapes), so a loop over DENALI objects or positions compiles once.
 from __future__ import annotations
 
 import dataclasses
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -21,6 +23,31 @@ from nlosplan.simulators.fast.transport import forward, object_nodes, scene_coun
 from nlosplan.simulators.scene import Scene
 
 _FORWARD = jax.jit(forward, static_argnums=(0, 4))
+
+#: Environment variable: how many chunks of a batch a simulator runs at once (threads); a design worker sets 1.
+THREADS_ENV = "NLOSPLAN_SIM_THREADS"
+
+
+def default_threads() -> int:
+    """Chunks of a batch run at once: ``$NLOSPLAN_SIM_THREADS``, else the cores this process may use.
+
+    Much of a compiled scene runs on one core (the deposits, the FFTs, the loop over the chunk's scenes), so
+    two chunks on two cores run nearly twice as fast as one after the other. A design worker process
+    (:func:`~nlosplan.planner.design.workers.init_worker`) sets 1: the pool runs one worker per core.
+    """
+    named = os.environ.get(THREADS_ENV, "").strip()
+    if named:
+        try:
+            value = int(named)
+        except ValueError:
+            raise UserError(f"{THREADS_ENV}={named!r} is not a whole number of threads") from None
+        if value < 1:
+            raise UserError(f"{THREADS_ENV}={named!r}: at least 1 thread")
+        return value
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def _batched(static, arrays, scene_p, sensor_p, parts):
@@ -153,12 +180,16 @@ class FastSimulator:
         iterations, ambient, dark and crosstalk); ``sensor`` is ignored then.
     chunk : int
         Scenes per compiled batch call (memory bound).
+    threads : int, optional
+        Chunks run at once, each on its own thread (default :func:`default_threads`: the usable cores, or
+        ``$NLOSPLAN_SIM_THREADS``; 1 in design workers). The first call's first chunk runs alone (it
+        compiles); results are the same as with one thread, in the same order.
     deposit : {"kernel", "window", "scatter"}, optional
         How arrivals are added onto the node grid (:data:`~nlosplan.sensor_models.transient.DEPOSIT_METHODS`):
-        the compiled C++ loop (:mod:`~nlosplan.sensor_models.deposit_kernel`, built on first use), one
-        windowed XLA scatter-add, or the two scalar ones of before issue 20 (``bench simulate --baseline``);
-        equal up to float summation order. Default: the kernel where it builds, else the windowed scatter-add
-        (with a warning that says why).
+        the compiled C++ loops (:mod:`~nlosplan.sensor_models.compiled`, built on first use; ``"kernel"`` also
+        sums a Lambertian object's convolved legs in C++ instead of FFTs), one windowed XLA scatter-add, or
+        the two scalar ones of before issue 20 (``bench simulate --baseline``); equal up to float rounding.
+        Default: the kernels where they build, else the windowed scatter-add (with a warning that says why).
     cache_chunks : bool
         Build each chunk's parameters once, on the host, and the sensors' terms (impulse-response matrix,
         first bounce, crosstalk) once, and reuse them in every call (default). ``False`` is the path of
@@ -183,7 +214,7 @@ class FastSimulator:
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
                  prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str | None = None,
-                 cache_chunks: bool = True, share: bool = True):
+                 cache_chunks: bool = True, share: bool = True, threads: int | None = None):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -201,6 +232,9 @@ class FastSimulator:
         if deposit != self.plan.static.deposit:
             self.plan = dataclasses.replace(self.plan, static=dataclasses.replace(self.plan.static, deposit=deposit))
         self.chunk = max(1, int(chunk))
+        self.threads = default_threads() if threads is None else int(threads)
+        if self.threads < 1:
+            raise UserError(f"threads={threads!r}: at least 1")
         self._arrays = to_jax(self.plan.arrays, self.dtype)
         self._params = None
         self.cache_chunks = bool(cache_chunks)
@@ -209,6 +243,7 @@ class FastSimulator:
         self.share = bool(share)
         self._shared = None
         self._scene_np = None
+        self._warm = set()  # the values of `parts` a call has run (and compiled) with here
 
     # ------------------------------------------------------------ parameters
     def params(self) -> tuple[dict, dict]:
@@ -343,12 +378,30 @@ class FastSimulator:
             scene_p, sensor_p = self._jax_params()
             chunks = [(jax.tree_util.tree_map(lambda a: a[idx], scene_p), keep) for idx, keep in self._chunk_index()]
             run = lambda chunk_p, idx: _BATCHED(static, self._arrays, chunk_p, sensor_p, parts)  # noqa: E731
+        jobs = [(chunk_p, keep, idx) for (chunk_p, keep), (idx, _) in zip(chunks, self._chunk_index())]
+
+        def one(job):
+            chunk_p, keep, idx = job
+            return jax.tree_util.tree_map(lambda a: np.asarray(a)[:, :keep], run(chunk_p, idx))
+
         outs = []
-        for i, ((chunk_p, keep), (idx, _)) in enumerate(zip(chunks, self._chunk_index())):
-            out = run(chunk_p, idx)
-            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:, :keep], out))
+
+        def done(out):
+            outs.append(out)
             if progress is not None:
-                progress(min(len(self.scenes), (i + 1) * self.chunk), len(self.scenes))
+                progress(min(len(self.scenes), len(outs) * self.chunk), len(self.scenes))
+
+        if parts not in self._warm:  # alone: the first call compiles (once per plan structure and process)
+            done(one(jobs.pop(0)))
+            self._warm.add(parts)
+        threads = min(self.threads, len(jobs))
+        if threads > 1:
+            with ThreadPoolExecutor(threads, thread_name_prefix="nlosplan-sim") as pool:
+                for out in pool.map(one, jobs):  # in order
+                    done(out)
+        else:
+            for job in jobs:
+                done(one(job))
         return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *outs)
 
     def _terms(self) -> dict:

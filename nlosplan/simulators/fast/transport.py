@@ -15,7 +15,7 @@ radiance ``L_i = (rho_w / pi) I dOmega / A``. An object point ``x`` (area
   detection cell ``j`` of zone ``z``, which returns
   ``(rho_w / pi) s dOmega_j / A_j * C(x, j) * rho / pi * E(x) dA`` along
   paths of length ``r_i + d_i + d_j + r_j``. The two legs are deposited on
-  time grids per sample and convolved (FFT), so the full double integral
+  time grids per sample and convolved (:func:`~nlosplan.sensor_models.transient.sum_convolve`), so the full double integral
   costs ``M (N1 + N2)`` path evaluations, not ``M N1 N2``.
 - Retroreflective object (the confocal shortcut ``x2 ~ x1`` of DENALI's
   Eq. 1): the power ``rho E_i(x) dA`` from cell ``i`` returns to cell ``i``
@@ -37,7 +37,8 @@ from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
 from nlosplan.sensor_models.pipeline import counts_from_rates
-from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit, deposit_at, deposit_method, irf_matrix
+from nlosplan.sensor_models.transient import (RowPattern, bin_nodes_without_irf, deposit, deposit_at, deposit_method,
+                                              irf_matrix, sum_convolve)
 from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
 from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
 
@@ -138,7 +139,7 @@ def _retro_near(st, a, p, x, near, grid, bw, t0):
     w = jnp.take(a["l1"], idx, mode="clip")[None] * exact * share * (p["albedo"] * p["areas"][:, None]) * recv
     dl = jnp.sqrt(jnp.sum((land - x[:, None]) ** 2, -1))
     pos = grid.node_position(2.0 * (r + dl) / C_M_PER_PS, bw, t0) - a["k_r0"]
-    rows = jnp.broadcast_to(jnp.maximum(zrow, 0), w.shape)
+    rows = RowPattern(jnp.maximum(zrow[0], 0), 0)  # a row per cell (its zone)
     return deposit_at(pos, jnp.where(ok, w, 0.0), rows, st.n_rows, st.n_r)
 
 
@@ -176,7 +177,7 @@ def _retro(st, a, p, grid, bw, t0):
     t = 2.0 * (a["r1"][None] + dist) / C_M_PER_PS
     pos = grid.node_position(t, bw, t0) - a["k_r0"]
     n1 = a["a1"].shape[0]
-    per_cell = deposit_at(pos, w, jnp.arange(n1)[None], n1, st.n_r)  # (N1, n_r)
+    per_cell = deposit_at(pos, w, RowPattern(jnp.arange(n1), 0), n1, st.n_r)  # a row per cell: (N1, n_r)
     # lobe spread at the centroid of the samples that see the wall (independent of which cells are kept)
     sees = jnp.max((a["wall_corners"][None] - x[:, None]) @ n[:, :, None], axis=(1, 2)) > 0
     seen_area = p["areas"] * (sees & ((x - a["w0"]) @ a["n_w"] > 0))
@@ -196,7 +197,7 @@ def _lambertian(st, a, p, grid, bw, t0):
     if near1 is not None:
         path1 = _near_path(a, "1", x, near1, path1)
     t1 = path1 / C_M_PER_PS
-    rows1 = jnp.broadcast_to(jnp.arange(m)[:, None], c1.shape)
+    rows1 = RowPattern(jnp.zeros(c1.shape[1], jnp.int32), 1)  # a row per sample
     leg1 = deposit_at((t1 - t0) / delta - 0.5 - a["j1"], a["l1"][None] * c1, rows1, m, st.n1)
     c2, d2, near2 = _coupling(a, p, "2", x, n, st.near2)
     w2 = a["l2"][None] * c2 * (p["albedo"] / math.pi) * p["areas"][:, None]
@@ -204,12 +205,9 @@ def _lambertian(st, a, p, grid, bw, t0):
     if near2 is not None:
         path2 = _near_path(a, "2", x, near2, path2)
     t2 = path2 / C_M_PER_PS
-    rows2 = jnp.arange(m)[:, None] * st.n_rows + a["row2"][None]
+    rows2 = RowPattern(a["row2"], st.n_rows)  # a row per sample and zone
     leg2 = deposit_at(t2 / delta - a["j2"], w2, rows2, m * st.n_rows, st.n2).reshape(m, st.n_rows, st.n2)
-    f1 = jnp.fft.rfft(leg1, st.fft_len, axis=-1)
-    f2 = jnp.fft.rfft(leg2, st.fft_len, axis=-1)
-    out = jnp.fft.irfft(jnp.einsum("mf,mzf->zf", f1, f2), st.fft_len, axis=-1)[:, : st.n1 + st.n2 - 1]
-    return jnp.maximum(out, 0.0), a["shift"]
+    return jnp.maximum(sum_convolve(leg1, leg2, st.fft_len), 0.0), a["shift"]
 
 
 def _place(out, shift, n_nodes):

@@ -1,4 +1,4 @@
-"""The compiled deposit kernel: the same sums and derivatives as XLA's scatter-add, and how it is built."""
+"""The compiled kernels (deposit, sum-convolution): the same sums and derivatives as the XLA paths, and how they are built."""
 
 import os
 import stat
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from nlosplan._jax import jax, jnp
-from nlosplan.sensor_models import deposit_kernel
-from nlosplan.sensor_models.transient import default_deposit, deposit_at, deposit_method
+from nlosplan.sensor_models import compiled
+from nlosplan.sensor_models.transient import RowPattern, default_deposit, deposit_at, deposit_method, sum_convolve
 from nlosplan.simulators import FastSimulator, denali_scene
 from nlosplan.sensor_models.presets import resolve_sensor
 
@@ -48,6 +48,81 @@ def test_kernel_equals_the_scatter_on_a_samples_by_cells_array(dtype):
     assert (grid * np.arange(n_nodes)).sum() == pytest.approx((wn * p)[inside].sum(), rel=1e-5)
 
 
+@pytest.mark.parametrize("method", ["kernel", "window", "scatter"])
+def test_row_patterns_equal_the_rows_written_out(method):
+    """A row per sample, per cell, and per sample and zone: the pattern and the full rows give the same sums."""
+    rng = np.random.default_rng(3)
+    m, n, n_nodes = 7, 9, 16
+    pos = jnp.asarray(rng.uniform(-2.0, n_nodes + 1.0, (m, n)))
+    w = jnp.asarray(rng.uniform(0.0, 1.0, (m, n)))
+    zone = jnp.asarray(rng.integers(0, 3, n))
+    cases = [(RowPattern(jnp.zeros(n, jnp.int32), 1), jnp.broadcast_to(jnp.arange(m)[:, None], (m, n)), m),
+             (RowPattern(jnp.arange(n), 0), jnp.broadcast_to(jnp.arange(n)[None], (m, n)), n),
+             (RowPattern(zone, 3), jnp.arange(m)[:, None] * 3 + zone[None], 3 * m)]
+    for pattern, full, n_rows in cases:
+        with deposit_method("window"):
+            ref = np.asarray(deposit_at(pos, w, full, n_rows, n_nodes))
+        with deposit_method(method):
+            got = np.asarray(jax.jit(lambda p, w: deposit_at(p, w, pattern, n_rows, n_nodes))(pos, w))
+            batched = np.asarray(jax.vmap(lambda p: deposit_at(p, w, pattern, n_rows, n_nodes))(jnp.stack([pos, pos + 1])))
+        assert (np.abs(ref).sum(axis=1) > 0).mean() > 0.8  # (nearly) every row gets arrivals
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(batched[0], ref, rtol=1e-12, atol=1e-15)
+        with deposit_method("window"):
+            np.testing.assert_allclose(batched[1], np.asarray(deposit_at(pos + 1, w, full, n_rows, n_nodes)), rtol=1e-12)
+
+
+def _legs(rng, m=6, z=3, n1=20, n2=12):
+    """Sparse legs like a Lambertian object's: leg 1 on a span of each row, leg 2 on a few nodes per zone."""
+    a = np.zeros((m, n1))
+    b = np.zeros((m, z, n2))
+    for i in range(m):
+        lo = rng.integers(0, n1 - 5)
+        a[i, lo:lo + rng.integers(1, 6)] = rng.uniform(0.1, 1.0)
+        for k in range(z):
+            b[i, k, rng.integers(0, n2, 3)] = rng.uniform(-1.0, 1.0, 3)
+    a[2] = 0.0  # a sample that sees no lit wall
+    return jnp.asarray(a), jnp.asarray(b)
+
+
+def test_sum_convolve_kernel_equals_the_definition_and_the_ffts():
+    rng = np.random.default_rng(5)
+    a, b = _legs(rng)
+    m, n1 = a.shape
+    _, z, n2 = b.shape
+    want = np.zeros((z, n1 + n2 - 1))
+    for i in range(m):
+        for k in range(z):
+            want[k] += np.convolve(np.asarray(a[i]), np.asarray(b[i, k]))
+    for method in ("kernel", "window"):
+        with deposit_method(method):
+            got = np.asarray(jax.jit(lambda a, b: sum_convolve(a, b, 32))(a, b))
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    with deposit_method("kernel"):  # float32, and batched
+        got32 = np.asarray(sum_convolve(a.astype(jnp.float32), b.astype(jnp.float32), 32))
+        batched = np.asarray(jax.vmap(lambda s: sum_convolve(a * s, b, 32))(jnp.asarray([1.0, -2.0])))
+    assert got32.dtype == np.float32
+    np.testing.assert_allclose(got32, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    np.testing.assert_allclose(batched, np.stack([want, -2.0 * want]), rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_sum_convolve_derivatives_equal_the_ffts():
+    rng = np.random.default_rng(6)
+    a, b = _legs(rng)
+    weight = jnp.asarray(rng.normal(size=(3, 31)))
+
+    def loss(s):
+        return jnp.sum(jnp.sin(sum_convolve(a * s[0] + s[1] * a**2, b * s[2], 32)) * weight)
+
+    s0 = jnp.asarray([1.0, 0.3, 1.5])
+    grads = _both(lambda: np.asarray(jax.grad(loss)(s0)))
+    jacs = _both(lambda: np.asarray(jax.jacfwd(lambda s: sum_convolve(a * s[0], b * s[2] + s[1], 32))(s0)))
+    hess = _both(lambda: np.asarray(jax.hessian(loss)(s0)))
+    assert np.abs(grads["window"]).max() > 0
+    for got in (grads, jacs, hess):
+        np.testing.assert_allclose(got["kernel"], got["window"], rtol=1e-9, atol=1e-12)
+
+
 def test_kernel_drops_nan_positions_and_rows_out_of_range():
     with deposit_method("kernel"):
         out = np.asarray(deposit_at(jnp.asarray([jnp.nan, 2.25, 1.0, 1.0]), jnp.asarray([5.0, 1.0, 3.0, 7.0]),
@@ -79,11 +154,12 @@ def test_kernel_derivatives_equal_the_scatter_forward_reverse_and_batched():
 
 
 def test_the_simulator_uses_the_kernel_by_default_and_gets_the_same_histograms():
-    assert deposit_kernel.available()  # the test machines have a C++ compiler
+    assert compiled.available()  # the test machines have a C++ compiler
     sensor = resolve_sensor("tmf8828-3x3-short")
     scenes = [denali_scene("A", "8in", 3, albedo=0.36, diffuse_albedo=0.2), denali_scene("minus", "4in", 60)]
     sim = FastSimulator(scenes, sensor, fidelity="draft")
     assert sim.plan.static.deposit == "kernel"
+    assert {o.kind for o in sim.plan.static.objects} == {"retroreflective", "lambertian"}  # the legs' sum-convolution
     got = np.asarray(sim.expected(), np.float64)
     ref = np.asarray(FastSimulator(scenes, sensor, fidelity="draft", deposit="window").expected(), np.float64)
     assert np.abs(ref).max() > 0
@@ -93,20 +169,20 @@ def test_the_simulator_uses_the_kernel_by_default_and_gets_the_same_histograms()
 @pytest.fixture
 def fresh(monkeypatch, tmp_path):
     """A process state that has not looked for the kernel yet, with its own kernel folder."""
-    monkeypatch.setattr(deposit_kernel, "_STATE", {})
+    monkeypatch.setattr(compiled, "_STATE", {})
     monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
-    monkeypatch.delenv(deposit_kernel.ENV_SWITCH, raising=False)
+    monkeypatch.delenv(compiled.ENV_SWITCH, raising=False)
     return tmp_path
 
 
 def test_a_fresh_folder_builds_the_library_once_and_loads_it(fresh, monkeypatch):
-    ok, path = deposit_kernel.status()
+    ok, path = compiled.status()
     assert ok and path.startswith(str(fresh / "kernels")) and os.path.getsize(path) > 0
     assert [p.name for p in (fresh / "kernels").iterdir() if p.suffix == ".tmp"] == []
     # a second process finds it built: no compiler run
-    monkeypatch.setattr(deposit_kernel, "_STATE", {})
-    monkeypatch.setattr(deposit_kernel, "_build", lambda *a: pytest.fail("rebuilt a library that exists"))
-    assert deposit_kernel.status() == (True, path)
+    monkeypatch.setattr(compiled, "_STATE", {})
+    monkeypatch.setattr(compiled, "_build", lambda *a: pytest.fail("rebuilt a library that exists"))
+    assert compiled.status() == (True, path)
     with deposit_method("kernel"):
         out = np.asarray(deposit_at(jnp.asarray([0.5]), jnp.asarray([2.0]), None, 1, 2))
     np.testing.assert_allclose(out, [[1.0, 1.0]])
@@ -114,11 +190,11 @@ def test_a_fresh_folder_builds_the_library_once_and_loads_it(fresh, monkeypatch)
 
 def test_without_a_compiler_the_scatter_is_used_and_a_warning_says_why(fresh, monkeypatch):
     monkeypatch.setenv("CXX", str(fresh / "no-such-compiler"))
-    with pytest.warns(RuntimeWarning, match=r"deposit kernel is not available \(no C\+\+ compiler .*XLA's scatter-add"):
+    with pytest.warns(RuntimeWarning, match=r"compiled kernels are not available \(no C\+\+ compiler .*XLA's scatter-add and FFTs"):
         assert default_deposit() == "window"
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # once per process
-        assert deposit_kernel.status() == (False, "no C++ compiler (set CXX, or install g++ or clang++)")
+        assert compiled.status() == (False, "no C++ compiler (set CXX, or install g++ or clang++)")
     sim = FastSimulator(denali_scene("A", "8in", 0), resolve_sensor("tmf8828-3x3-short"), fidelity="draft")
     assert sim.plan.static.deposit == "window"
 
@@ -129,7 +205,7 @@ def test_a_plan_made_for_the_kernel_runs_where_it_cannot_be_built(fresh, monkeyp
     scene = denali_scene("S", "4in", 12)
     ref = np.asarray(FastSimulator(scene, sensor, fidelity="draft", deposit="window").expected())
     jax.clear_caches()  # trace again, in the "worker"
-    monkeypatch.setattr(deposit_kernel, "_STATE", {})
+    monkeypatch.setattr(compiled, "_STATE", {})
     monkeypatch.setenv("CXX", str(fresh / "no-such-compiler"))
     with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
         got = np.asarray(FastSimulator(scene, sensor, fidelity="draft", deposit="kernel").expected())
@@ -143,15 +219,15 @@ def test_a_failing_build_names_the_compiler_error_and_leaves_no_file(fresh, monk
     cxx.chmod(cxx.stat().st_mode | stat.S_IEXEC)
     monkeypatch.setenv("CXX", str(cxx))
     with pytest.warns(RuntimeWarning, match="bad-cxx failed: deposit.cc:1: error: no such header"):
-        assert not deposit_kernel.available()
+        assert not compiled.available()
     assert sorted(p.name for p in (fresh / "kernels").iterdir() if not p.name.endswith(".lock")) == []
 
 
 def test_the_switch_turns_it_off_without_a_warning(fresh, monkeypatch):
-    monkeypatch.setenv(deposit_kernel.ENV_SWITCH, "0")
+    monkeypatch.setenv(compiled.ENV_SWITCH, "0")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert default_deposit() == "window"
-    assert deposit_kernel.status() == (False, f"turned off by {deposit_kernel.ENV_SWITCH}=0")
-    with pytest.raises(RuntimeError, match="deposit kernel is not available: turned off"):
-        deposit_kernel.call(jnp.zeros(1), jnp.zeros(1), jnp.zeros(1, jnp.int32), 1, 1)
+    assert compiled.status() == (False, f"turned off by {compiled.ENV_SWITCH}=0")
+    with pytest.raises(RuntimeError, match="compiled kernels are not available: turned off"):
+        compiled.deposit(jnp.zeros(1), jnp.zeros(1), jnp.zeros(1, jnp.int32), 1, 1)

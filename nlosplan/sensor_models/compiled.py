@@ -1,27 +1,30 @@
-"""The compiled arrival-time deposit: built on first use, loaded into XLA as a CPU custom call.
+"""The transient's compiled kernels: built on first use, loaded into XLA as CPU custom calls.
 
-:func:`~nlosplan.sensor_models.transient.deposit_at` adds every arrival's
-weight onto two nodes of its row. On XLA's CPU backend the scatter-add of that
-linear map, and above all the fused loop that built its update windows from the
-raveled (samples x cells) arrivals, cost ~3/4 of a simulated DENALI scene
-(issue 20's profile, docs/fast-simulator.md); the same sums in one C++ loop
-(``kernels/deposit.cc``, an XLA FFI handler) over the arrivals in their own
-shape make ``bench simulate`` 2-3.6x faster at equal results.
+Two linear maps of the fast simulator run as C++ loops (XLA FFI handlers in ``kernels/``):
 
-The source ships with the package and is compiled here, once per machine and
+- ``deposit.cc``: :func:`~nlosplan.sensor_models.transient.deposit_at` adds every arrival's weight onto
+  two nodes of its row. On XLA's CPU backend the scatter-add of that map, and above all the fused loop
+  that built its update windows from the raveled (samples x cells) arrivals, cost ~3/4 of a simulated
+  DENALI scene (issue 20's profile, docs/fast-simulator.md); one C++ loop over the arrivals in their own
+  shape made ``bench simulate`` 2-3.6x faster at equal results.
+- ``sum_convolve.cc``: a Lambertian object's two legs convolved and summed over its samples
+  (:func:`~nlosplan.sensor_models.transient.sum_convolve`), over the legs' non-zero spans instead of
+  FFTs of every (sample, zone) row.
+
+The sources ship with the package and are compiled here into one library, once per machine and
 jaxlib version, against the headers jaxlib ships (``jax.ffi.include_dir()``),
 with the C++ compiler named by ``$CXX`` or found as ``c++``/``g++``/``clang++``.
 The library is kept in ``$NLOSPLAN_CACHE/kernels`` (or
-``~/.cache/nlosplan/kernels``) under a name that hashes the source, the jaxlib
+``~/.cache/nlosplan/kernels``) under a name that hashes the sources, the jaxlib
 version, the compiler and its flags; a second process (or Dask worker) loads
 it in milliseconds. Builds are atomic and locked, so parallel workers build it
 once.
 
 Where it cannot be built (no compiler, a failed build) the simulator uses the
-XLA scatter-add (``deposit="window"``), which gives the same result up to
-float summation order, and says so once (a ``RuntimeWarning`` naming the
-reason). ``NLOSPLAN_DEPOSIT_KERNEL=0`` turns the kernel off on purpose (no
-warning).
+XLA paths (the scatter-add ``deposit="window"`` and the FFTs), which give the
+same result up to float rounding, and says so once (a ``RuntimeWarning``
+naming the reason). ``NLOSPLAN_KERNELS=0`` turns the kernels off on purpose
+(no warning).
 """
 
 from __future__ import annotations
@@ -41,15 +44,16 @@ from filelock import FileLock
 from nlosplan._jax import jax
 from nlosplan.resources import cache_root
 
-#: Name of the XLA custom-call target.
-TARGET = "nlosplan_deposit"
-#: Environment variable that turns the kernel off (``0``, ``off``, ``false``, ``no``).
-ENV_SWITCH = "NLOSPLAN_DEPOSIT_KERNEL"
+#: XLA custom-call targets and the library symbols of their handlers.
+TARGETS = {"nlosplan_deposit": "NlosplanDeposit", "nlosplan_sum_convolve": "NlosplanSumConvolve"}
+#: Environment variable that turns the kernels off (``0``, ``off``, ``false``, ``no``).
+ENV_SWITCH = "NLOSPLAN_KERNELS"
 #: Compiler flags (no ``-march``: the cached library may be shared by machines with different CPUs).
 FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-fno-math-errno")
 #: Longest a build may take, seconds.
 BUILD_TIMEOUT_S = 300
-SOURCE = Path(__file__).with_name("kernels") / "deposit.cc"
+#: The kernels' C++ sources, compiled into one library.
+SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc"))
 
 _STATE: dict = {}  # "ok": bool, "reason": str (when not ok), "path": Path (when ok)
 _REGISTERED: list = []  # the library whose handler XLA holds in this process
@@ -84,22 +88,24 @@ def _compiler_id(cxx: str) -> str:
 
 
 class _BuildFailed(Exception):
-    """The kernel cannot be built or loaded here; the message says why (shown in the fallback's warning)."""
+    """The kernels cannot be built or loaded here; the message says why (shown in the fallback's warning)."""
 
 
 def library_path(cxx: str) -> Path:
-    """Where the library built with ``cxx`` for this source and jaxlib lives (built or not)."""
+    """Where the library built with ``cxx`` for these sources and jaxlib lives (built or not)."""
     import jaxlib
 
     key = hashlib.sha256()
-    for part in (SOURCE.read_bytes(), jaxlib.__version__.encode(), _compiler_id(cxx).encode(), " ".join(FLAGS).encode()):
+    parts = (*(src.read_bytes() for src in SOURCES), jaxlib.__version__.encode(), _compiler_id(cxx).encode(),
+             " ".join(FLAGS).encode())
+    for part in parts:
         key.update(part)
         key.update(b"\0")
-    return kernel_dir() / f"deposit-{key.hexdigest()[:20]}.so"
+    return kernel_dir() / f"kernels-{key.hexdigest()[:20]}.so"
 
 
 def _build(cxx: str, target: Path) -> None:
-    """Compile the source into ``target`` atomically (a temporary file in the same folder, then renamed)."""
+    """Compile the sources into ``target`` atomically (a temporary file in the same folder, then renamed)."""
     target.parent.mkdir(parents=True, exist_ok=True)
     with FileLock(str(target) + ".lock", timeout=BUILD_TIMEOUT_S):
         if target.exists():
@@ -107,7 +113,7 @@ def _build(cxx: str, target: Path) -> None:
         fd, tmp = tempfile.mkstemp(prefix=target.name + ".", suffix=".tmp", dir=target.parent)
         os.close(fd)
         try:
-            cmd = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), str(SOURCE), "-o", tmp]
+            cmd = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), *map(str, SOURCES), "-o", tmp]
             try:
                 out = subprocess.run(cmd, capture_output=True, text=True, timeout=BUILD_TIMEOUT_S)
             except (OSError, subprocess.SubprocessError) as exc:
@@ -122,8 +128,9 @@ def _build(cxx: str, target: Path) -> None:
 
 
 def _load() -> Path:
-    if not SOURCE.is_file():
-        raise _BuildFailed(f"the kernel source {SOURCE} is missing from the installed package")
+    missing = [src.name for src in SOURCES if not src.is_file()]
+    if missing:
+        raise _BuildFailed(f"the kernel sources {', '.join(missing)} are missing from the installed package")
     cxx = _compiler()
     if cxx is None:
         raise _BuildFailed("no C++ compiler (set CXX, or install g++ or clang++)")
@@ -132,17 +139,18 @@ def _load() -> Path:
         _build(cxx, path)
     try:
         lib = ctypes.cdll.LoadLibrary(str(path))
-        handler = lib.NlosplanDeposit
+        handlers = {target: getattr(lib, symbol) for target, symbol in TARGETS.items()}
     except (OSError, AttributeError) as exc:
         raise _BuildFailed(f"{path} does not load ({exc}); delete it to rebuild") from None
-    if not _REGISTERED:  # XLA takes one handler per name and process (a library of the same source)
-        jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(handler), platform="cpu")
+    if not _REGISTERED:  # XLA takes one handler per name and process (a library of the same sources)
+        for target, handler in handlers.items():
+            jax.ffi.register_ffi_target(target, jax.ffi.pycapsule(handler), platform="cpu")
         _REGISTERED.append(path)
     return path
 
 
 def status() -> tuple[bool, str]:
-    """``(available, why)``: whether the kernel is built and registered in this process (building it if needed).
+    """``(available, why)``: whether the kernels are built and registered in this process (building them if needed).
 
     ``why`` is the library's path when available, else the reason it is not (the first call that finds it
     unavailable, other than by :data:`ENV_SWITCH`, also warns once).
@@ -154,18 +162,24 @@ def status() -> tuple[bool, str]:
             _STATE.update(ok=True, path=_load())
         except (_BuildFailed, OSError) as exc:
             _STATE.update(ok=False, reason=str(exc))
-            warnings.warn(f"nlosplan: the compiled deposit kernel is not available ({exc}); the fast simulator "
-                          "uses XLA's scatter-add instead (the same results, 2-3x slower)", RuntimeWarning,
+            warnings.warn(f"nlosplan: the compiled kernels are not available ({exc}); the fast simulator "
+                          "uses XLA's scatter-add and FFTs instead (the same results, 2-4x slower)", RuntimeWarning,
                           stacklevel=2)
     return (True, str(_STATE["path"])) if _STATE["ok"] else (False, _STATE["reason"])
 
 
 def available() -> bool:
-    """Whether :func:`call` can be traced in this process (see :func:`status`)."""
+    """Whether :func:`deposit` and :func:`sum_convolve` can be traced in this process (see :func:`status`)."""
     return status()[0]
 
 
-def call(positions, weights, rows, n_rows: int, n_nodes: int):
+def _require() -> None:
+    ok, why = status()
+    if not ok:
+        raise RuntimeError(f"the compiled kernels are not available: {why}")
+
+
+def deposit(positions, weights, rows, n_rows: int, n_nodes: int, step: int = 0):
     """The deposit as a custom call (no derivative rule: see ``transient._kernel_deposit``).
 
     Parameters
@@ -173,17 +187,42 @@ def call(positions, weights, rows, n_rows: int, n_nodes: int):
     positions, weights : array, shape (..., L)
         Fractional node coordinates and weights, one float dtype.
     rows : array of int32, shape (..., L) or (L,)
-        The row of each arrival, or of each position along the last axis (the same for every leading index).
+        The row of each arrival, or of each position along the last axis: arrival ``k`` (flat index) is in
+        row ``(k // L) * step + rows[k % L]``.
     n_rows, n_nodes : int
+    step : int
+        Rows added per block of ``L`` arrivals (0: the same rows in every block).
 
     Returns
     -------
     array, shape (n_rows, n_nodes)
         Batched under ``vmap`` (leading axes broadcast over all three inputs).
     """
-    ok, why = status()
-    if not ok:
-        raise RuntimeError(f"the compiled deposit kernel is not available: {why}")
+    _require()
     out = jax.ShapeDtypeStruct((n_rows, n_nodes), positions.dtype)
-    return jax.ffi.ffi_call(TARGET, out, vmap_method="broadcast_all")(
-        positions, weights, rows, n_rows=np.int64(n_rows), n_nodes=np.int64(n_nodes))
+    return jax.ffi.ffi_call("nlosplan_deposit", out, vmap_method="broadcast_all")(
+        positions, weights, rows, n_rows=np.int64(n_rows), n_nodes=np.int64(n_nodes), step=np.int64(step))
+
+
+def sum_convolve(a, b):
+    """Both legs convolved along time and summed over samples, as a custom call (no derivative rule: see
+    ``transient.sum_convolve``).
+
+    Parameters
+    ----------
+    a : array, shape (M, N1)
+        Leg 1 of each sample on the node grid.
+    b : array, shape (M, Z, N2)
+        Leg 2 of each sample and zone; the same float dtype as ``a``.
+
+    Returns
+    -------
+    array, shape (Z, N1 + N2 - 1)
+        ``out[z, t] = sum_m sum_u b[m, z, u] a[m, t - u]``; batched under ``vmap``.
+    """
+    _require()
+    m, n1 = a.shape
+    _, z, n2 = b.shape
+    out = jax.ShapeDtypeStruct((z, n1 + n2 - 1), a.dtype)
+    return jax.ffi.ffi_call("nlosplan_sum_convolve", out, vmap_method="broadcast_all")(
+        a, b, m=np.int64(m), n1=np.int64(n1), z=np.int64(z), n2=np.int64(n2))
