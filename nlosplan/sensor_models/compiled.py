@@ -49,7 +49,7 @@ TARGETS = {"nlosplan_deposit": "NlosplanDeposit", "nlosplan_sum_convolve": "Nlos
 #: Environment variable that turns the kernels off (``0``, ``off``, ``false``, ``no``).
 ENV_SWITCH = "NLOSPLAN_KERNELS"
 #: Compiler flags (no ``-march``: the cached library may be shared by machines with different CPUs).
-FLAGS = ("-O3", "-std=c++17", "-shared", "-fPIC", "-fno-math-errno")
+FLAGS = ("-O3", "-std=c++17", "-fPIC", "-fno-math-errno")
 #: Longest a build may take, seconds.
 BUILD_TIMEOUT_S = 300
 #: The kernels' C++ sources, compiled into one library.
@@ -110,21 +110,36 @@ def _build(cxx: str, target: Path) -> None:
     with FileLock(str(target) + ".lock", timeout=BUILD_TIMEOUT_S):
         if target.exists():
             return
-        fd, tmp = tempfile.mkstemp(prefix=target.name + ".", suffix=".tmp", dir=target.parent)
-        os.close(fd)
+        with tempfile.TemporaryDirectory(prefix=target.name + ".", suffix=".tmp", dir=target.parent) as tmp:
+            # each source on its own core (most of a compile is parsing jaxlib's FFI header), then one link
+            objects = [os.path.join(tmp, src.stem + ".o") for src in SOURCES]
+            _run_all(cxx, [[cxx, *FLAGS, "-I", jax.ffi.include_dir(), "-c", str(src), "-o", obj]
+                           for src, obj in zip(SOURCES, objects)])
+            library = os.path.join(tmp, "kernels.so")
+            _run_all(cxx, [[cxx, "-shared", *objects, "-o", library]])
+            os.replace(library, target)
+
+
+def _run_all(cxx: str, commands: list[list[str]]) -> None:
+    """Run the compiler commands at once; raise :class:`_BuildFailed` with the first error line of the first failing one."""
+    try:
+        procs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for cmd in commands]
+    except OSError as exc:
+        raise _BuildFailed(f"{cxx} failed to run ({exc})") from None
+    failures = []
+    for proc in procs:
         try:
-            cmd = [cxx, *FLAGS, "-I", jax.ffi.include_dir(), *map(str, SOURCES), "-o", tmp]
-            try:
-                out = subprocess.run(cmd, capture_output=True, text=True, timeout=BUILD_TIMEOUT_S)
-            except (OSError, subprocess.SubprocessError) as exc:
-                raise _BuildFailed(f"{cxx} failed to run ({exc})") from None
-            if out.returncode != 0:
-                errors = [ln for ln in out.stderr.splitlines() if "error" in ln] or out.stderr.splitlines() or ["?"]
-                raise _BuildFailed(f"{cxx} failed: {errors[0].strip()}")
-            os.replace(tmp, target)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+            _, err = proc.communicate(timeout=BUILD_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            err = f"error: no result after {BUILD_TIMEOUT_S} s"
+        if proc.returncode != 0:
+            failures.append(err)
+    if failures:
+        lines = failures[0].splitlines()
+        errors = [ln for ln in lines if "error" in ln] or lines or ["?"]
+        raise _BuildFailed(f"{cxx} failed: {errors[0].strip()}")
 
 
 def _load() -> Path:
