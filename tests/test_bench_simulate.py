@@ -99,7 +99,7 @@ def test_scene_models_are_timed_and_scored_in_the_same_run(run):
     # --baseline: the path of before issue 20 timed beside the current one, same results within float32 rounding
     for r in rows.values():
         b = r["baseline"]
-        assert b["deposit"] == "scatter" and b["cache_chunks"] is False and b["scenes_per_second"] > 0 and b["single_call_ms"] > 0
+        assert b["deposit"] == "scatter" and b["cache_chunks"] is False and b["threads"] == 1 and b["scenes_per_second"] > 0 and b["single_call_ms"] > 0
         assert r["single_call_ms"] > 0 and r["speed_ratio_vs_baseline"] == pytest.approx(
             b["scenes_per_second"] and r["scenes_per_second"] / b["scenes_per_second"])
         assert b["max_rel_diff_vs_new"] < 1e-5

@@ -106,8 +106,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help=f"also plot error against run time: {DEFAULT_PLOT}, or PATH (.png, .pdf, .svg, ...)")
     parser.add_argument("--baseline", action="store_true",
                         help="also time each scene model with the path of before issue 20 (two scalar "
-                             "scatter-adds, chunk parameters gathered on every call) beside the current one in "
-                             "the same run; prints the ratios")
+                             "scatter-adds, chunk parameters gathered on every call, chunks one after the other) "
+                             "beside the current one in the same run; prints the ratios")
     parser.add_argument("--json", action="store_true", help="machine-readable output")
     return parser
 

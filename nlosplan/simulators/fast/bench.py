@@ -67,8 +67,9 @@ TARGET_SCENES_PER_SECOND = 200.0
 #: Stretch target (histograms per second).
 STRETCH_SCENES_PER_SECOND = 1000.0
 #: ``FastSimulator`` options of the path before issue 20, timed beside the current one by ``--baseline``:
-#: two scalar scatter-adds, and each chunk's parameters gathered from the device arrays on every call.
-BASELINE_PATH = {"deposit": "scatter", "cache_chunks": False}
+#: two scalar scatter-adds, each chunk's parameters gathered from the device arrays on every call, the chunks one
+#: after the other.
+BASELINE_PATH = {"deposit": "scatter", "cache_chunks": False, "threads": 1}
 #: Default levels, reference positions and plot path.
 DEFAULT_LEVELS = ("draft", "low", "default", "high")
 #: A mixed batch: five objects of every class (letters, shapes, digits) and both sizes; the reference
@@ -433,7 +434,7 @@ def _against_baseline(scenes, sim, best, got, ref, index, reference_positions, s
     _, old_best = _warm_and_time(old, repeats, min_seconds)
     old_obj = old.expected(parts=True)["object"]
     old_got = {p: old_obj[index[p]] for p in reference_positions}
-    new_path = {"deposit": sim.plan.static.deposit, "cache_chunks": sim.cache_chunks}
+    new_path = {"deposit": sim.plan.static.deposit, "cache_chunks": sim.cache_chunks, "threads": sim.threads}
     single = {}
     for key, path in (("new", new_path), ("old", BASELINE_PATH)):
         one = FastSimulator(scenes[0], sensor, fidelity=level, dtype=dtype, **path)
