@@ -56,7 +56,7 @@ BUILD_TIMEOUT_S = 300
 SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc"))
 
 _STATE: dict = {}  # "ok": bool, "reason": str (when not ok), "path": Path (when ok)
-_REGISTERED: list = []  # the library whose handler XLA holds in this process
+_REGISTERED: list = []  # the library whose handlers XLA holds in this process
 
 
 def kernel_dir() -> Path:

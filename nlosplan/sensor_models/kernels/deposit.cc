@@ -31,7 +31,7 @@ void Deposit(const T* p, const T* w, const int32_t* r, T* out, int64_t batch, in
     const T* wb = w + b * n;
     const int32_t* rb = r + b * period;
     T* ob = out + b * plane;
-    for (int64_t start = 0, first = 0; start < n; start += period, first += step) {  // once: a row per arrival
+    for (int64_t start = 0, first = 0; start < n; start += period, first += step) {  // blocks of L (one: N = L)
       for (int64_t i = 0; i < period; ++i) {
         const T wk = wb[start + i];
         const T pk = pb[start + i];

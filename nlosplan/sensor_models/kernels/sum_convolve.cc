@@ -2,11 +2,12 @@
 //
 // out[z, t] = sum_m sum_u b[m, z, u] a[m, t - u]: a (m, n1) is each sample's light from the lit wall (leg 1) and
 // b (m, z, n2) its return to each zone through the detection cells (leg 2), both on the node grid; out (z, n1 +
-// n2 - 1). The XLA path (nlosplan.simulators.fast.transport) does this with FFTs of every (sample, zone) row
-// (~10 MFLOP a DENALI scene). Both legs are sparse in time: a sample's leg 1 covers the nodes between its
-// nearest and farthest lit cell, and a zone's few detection cells put leg 2 on a handful of nodes. So this
-// adds a[m]'s non-zero span, scaled, at each non-zero node of b[m, z] (exact sums, no FFT round-off), which on
-// DENALI scenes is ~3x less work than the FFTs and runs as contiguous vector loops.
+// n2 - 1). The XLA path (nlosplan.sensor_models.transient.sum_convolve) does this with FFTs of every (sample,
+// zone) row and a product of the spectra summed over samples. Both legs are sparse in time: a sample's leg 1
+// covers the nodes between its nearest and farthest lit cell, and a zone's few detection cells put leg 2 on a
+// handful of nodes. So this adds a[m]'s non-zero span, scaled, at each non-zero node of b[m, z] (exact sums, no
+// FFT round-off): contiguous vector loops, 0.47 ms a DENALI scene against ~1.8 ms for the FFTs and the product
+// (issue 20's profile, docs/fast-simulator.md).
 //
 // Shapes: a (B, m, n1), b (B, m, z, n2) with B >= 1 leading batch entries (vmap); out (B, z, n1 + n2 - 1).
 // Built on first use by nlosplan/sensor_models/compiled.py with the C++ compiler and the headers in jaxlib.
