@@ -15,8 +15,9 @@ radiance ``L_i = (rho_w / pi) I dOmega / A``. An object point ``x`` (area
   detection cell ``j`` of zone ``z``, which returns
   ``(rho_w / pi) s dOmega_j / A_j * C(x, j) * rho / pi * E(x) dA`` along
   paths of length ``r_i + d_i + d_j + r_j``. The two legs are deposited on
-  time grids per sample and convolved (:func:`~nlosplan.sensor_models.transient.sum_convolve`), so the full double integral
-  costs ``M (N1 + N2)`` path evaluations, not ``M N1 N2``.
+  time grids per sample, convolved and summed over the samples
+  (:func:`~nlosplan.sensor_models.transient.sum_convolve`), so the full double
+  integral costs ``M (N1 + N2)`` path evaluations, not ``M N1 N2``.
 - Retroreflective object (the confocal shortcut ``x2 ~ x1`` of DENALI's
   Eq. 1): the power ``rho E_i(x) dA`` from cell ``i`` returns to cell ``i``
   in a Gaussian lobe; the zone containing the lobe's landing spot collects
