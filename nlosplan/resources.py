@@ -1,4 +1,4 @@
-"""What the machine can give a request: memory available, the range of seeds, and where caches live.
+"""What the machine can give a request: memory available, the range of seeds, threads, and where caches live.
 
 Commands estimate the memory a request needs from its sizes (zones x bins x
 repeats, draws, scenes) before any work and refuse it with one line when it
@@ -15,12 +15,39 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_SEED", "available_memory", "cache_root", "check_memory", "format_bytes"]
+__all__ = ["MAX_SEED", "THREADS_ENV", "available_memory", "cache_root", "check_memory", "default_threads", "format_bytes"]
 
 #: Largest seed every random generator of the project takes (numpy, JAX, torch): seeds are 0..2**32-1.
 MAX_SEED = 2**32 - 1
 
 _GIB = 1024**3
+
+
+#: Environment variable: how many chunks of a batch a simulator runs at once (threads); a design worker sets 1.
+THREADS_ENV = "NLOSPLAN_SIM_THREADS"
+
+
+def default_threads() -> int:
+    """Chunks of a batch run at once: ``$NLOSPLAN_SIM_THREADS``, else the cores this process may use.
+
+    The fast simulator runs a batch's chunks on this many threads: much of a compiled scene runs on one core
+    (the kernels, the loop over a chunk's scenes), so two chunks on two cores ran 1.5-2x as fast as one after
+    the other. A design worker process (:func:`~nlosplan.planner.design.workers.init_worker`) sets 1: the pool
+    runs one worker per core.
+    """
+    named = os.environ.get(THREADS_ENV, "").strip()
+    if named:
+        try:
+            value = int(named)
+        except ValueError:
+            raise UserError(f"{THREADS_ENV}={named!r} is not a whole number of threads") from None
+        if value < 1:
+            raise UserError(f"{THREADS_ENV}={named!r}: at least 1 thread")
+        return value
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def cache_root() -> Path:

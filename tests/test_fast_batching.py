@@ -41,7 +41,7 @@ def test_chunks_on_threads_equal_one_thread_in_order_with_progress():
 
 def test_thread_count_from_the_environment(monkeypatch):
     from nlosplan.planner.design.workers import init_worker
-    from nlosplan.simulators.fast.simulator import THREADS_ENV, default_threads
+    from nlosplan.resources import THREADS_ENV, default_threads
 
     monkeypatch.setenv(THREADS_ENV, "3")
     assert default_threads() == 3 and FastSimulator(denali_scene(), S3, fidelity=FID).threads == 3

@@ -6,6 +6,8 @@ import os
 import threading
 import time
 
+from nlosplan.resources import THREADS_ENV
+
 __all__ = ["WATCH_PARENT_S", "init_worker"]
 
 #: Seconds between a worker's checks that the process which started it is still there.
@@ -38,7 +40,7 @@ def init_worker(parent: int | None = None) -> None:
     if parent is not None:
         _exit_with_parent(parent)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    os.environ.setdefault("NLOSPLAN_SIM_THREADS", "1")  # the fast simulator's chunks one after the other
+    os.environ.setdefault(THREADS_ENV, "1")  # the fast simulator's chunks one after the other
     # numpy's BLAS started its threads (one per core) when numpy was imported, before this runs: the variable
     # above comes too late for it, and two workers' matrix products (the ideal observer's) ran four threads
     # on two cores

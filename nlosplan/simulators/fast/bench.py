@@ -37,9 +37,9 @@ from nlosplan.denali import N_POSITIONS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models import compiled
+from nlosplan.resources import default_threads
 from nlosplan.sensor_models.presets import resolve_sensor
 from nlosplan.sensor_models.transient import default_deposit
-from nlosplan.simulators.fast.simulator import default_threads
 from nlosplan.simulators.fast.bench_metrics import (
     CENTROID_MIN_SHARE,
     FLOPS_DEPOSIT,

@@ -8,13 +8,13 @@ array shapes), so a loop over DENALI objects or positions compiles once.
 from __future__ import annotations
 
 import dataclasses
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
+from nlosplan.resources import default_threads
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.pipeline import sample_counts
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
@@ -23,32 +23,6 @@ from nlosplan.simulators.fast.transport import forward, object_nodes, scene_coun
 from nlosplan.simulators.scene import Scene
 
 _FORWARD = jax.jit(forward, static_argnums=(0, 4))
-
-#: Environment variable: how many chunks of a batch a simulator runs at once (threads); a design worker sets 1.
-THREADS_ENV = "NLOSPLAN_SIM_THREADS"
-
-
-def default_threads() -> int:
-    """Chunks of a batch run at once: ``$NLOSPLAN_SIM_THREADS``, else the cores this process may use.
-
-    Much of a compiled scene runs on one core (the deposits, the FFTs, the loop over the chunk's scenes), so
-    two chunks on two cores run nearly twice as fast as one after the other. A design worker process
-    (:func:`~nlosplan.planner.design.workers.init_worker`) sets 1: the pool runs one worker per core.
-    """
-    named = os.environ.get(THREADS_ENV, "").strip()
-    if named:
-        try:
-            value = int(named)
-        except ValueError:
-            raise UserError(f"{THREADS_ENV}={named!r} is not a whole number of threads") from None
-        if value < 1:
-            raise UserError(f"{THREADS_ENV}={named!r}: at least 1 thread")
-        return value
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
 
 def _batched(static, arrays, scene_p, sensor_p, parts):
     """Every scene under every sensor: (S, N, ...).
@@ -181,7 +155,7 @@ class FastSimulator:
     chunk : int
         Scenes per compiled batch call (memory bound).
     threads : int, optional
-        Chunks run at once, each on its own thread (default :func:`default_threads`: the usable cores, or
+        Chunks run at once, each on its own thread (default :func:`~nlosplan.resources.default_threads`: the usable cores, or
         ``$NLOSPLAN_SIM_THREADS``; 1 in design workers). The first call's first chunk runs alone (it
         compiles); results are the same as with one thread, in the same order.
     deposit : {"kernel", "window", "scatter"}, optional
