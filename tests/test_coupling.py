@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from nlosplan._jax import jax, jnp
-from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
+from nlosplan.simulators.fast.coupling import _angle, far_coupling, polygon_coupling
 
 N_W = np.array([0.0, 0.0, 1.0])  # wall plane z = 0, lit side up
 
@@ -74,3 +74,51 @@ def test_gradient_finite_1mm_from_the_wall():
     assert np.all(np.isfinite(np.array(g)))
     fd = (f(0.0011, 0.0) - f(0.0009, 0.0)) / 0.0002
     assert float(g[0]) == pytest.approx(float(fd), rel=1e-3)
+
+
+def _angles_case():
+    rng = np.random.default_rng(3)
+    y = np.abs(rng.standard_normal(20000)) * 10.0 ** rng.uniform(-8, 3, 20000)
+    x = rng.standard_normal(20000) * 10.0 ** rng.uniform(-8, 3, 20000)
+    # axes, the diagonal, both signs of zero, tiny and equal magnitudes, the tan(pi/8) reduction bound
+    y = np.concatenate([y, [0.0, 0.0, 1.0, 1.0, 1e-20, 3.0, 0.0, 0.41421356, 0.41421357, 2.0]]).astype(np.float32)
+    x = np.concatenate([x, [1.0, -1.0, 0.0, -0.0, 1e-20, 3.0, 0.0, 1.0, 1.0, -2.0]]).astype(np.float32)
+    return y, x
+
+
+def test_float32_angle_is_atan2_to_float32_rounding():
+    y, x = _angles_case()
+    exact = np.arctan2(y.astype(np.float64), x.astype(np.float64))
+    raw = jax.jit(_angle)(jnp.asarray(y), jnp.asarray(x))
+    assert raw.dtype == jnp.float32
+    got = np.asarray(raw, np.float64)
+    assert np.all(np.isfinite(got))
+    assert np.max(np.abs(got - exact)) < 3e-7  # numpy's own float32 arctan2 is off by up to ~3e-7 here
+    assert got[-10] == 0.0 and got[-9] == pytest.approx(np.pi, abs=3e-7) and got[-8] == pytest.approx(np.pi / 2, abs=2e-7)
+    # float64 keeps jnp.arctan2
+    y64, x64 = y.astype(np.float64), x.astype(np.float64)
+    np.testing.assert_array_equal(np.asarray(_angle(jnp.asarray(y64), jnp.asarray(x64))), np.asarray(jnp.arctan2(y64, x64)))
+
+
+def test_float32_angle_derivative_is_atan2s():
+    y, x = _angles_case()
+    y, x = y[:2000], x[:2000]
+    g = jax.jit(jax.vmap(jax.grad(_angle, argnums=(0, 1))))(jnp.asarray(y), jnp.asarray(x))
+    r2 = y.astype(np.float64) ** 2 + x.astype(np.float64) ** 2
+    for got, want in zip(g, (x / r2, -y / r2)):
+        got = np.asarray(got, np.float64)
+        assert np.all(np.isfinite(got))
+        np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-30)
+
+
+def test_polygon_coupling_in_float32_matches_float64():
+    rng = np.random.default_rng(5)
+    x = np.column_stack([rng.uniform(-0.1, 0.1, 64), rng.uniform(-0.1, 0.1, 64), rng.uniform(1e-3, 0.2, 64)])
+    n = rng.standard_normal((64, 3))
+    n[:, 2] = -np.abs(n[:, 2])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    corners = np.stack([quad(-0.05, 0.07, -0.04, 0.09), quad(0.1, 0.2, 0.0, 0.05), quad(-0.01, 0.01, -0.01, 0.01)])
+    want = np.asarray(polygon_coupling(x, n, corners))
+    got = np.asarray(polygon_coupling(*(jnp.asarray(a, jnp.float32) for a in (x, n, corners))), np.float64)
+    assert want.min() >= 0 and want.max() > 0.1
+    np.testing.assert_allclose(got, want, rtol=2e-5, atol=2e-6 * want.max())

@@ -25,7 +25,7 @@ from nlosplan.sensor_models.zones import zone_edges_tan
 #: Node axes are rounded up to a multiple of this, so nearby scenes share compiled code.
 BUCKET = 64
 #: Surface points are padded (with zero area) to a multiple of this, for shared compiled code.
-SAMPLE_BUCKET = 64
+SAMPLE_BUCKET = 16
 #: Object points closer to a wall cell than this many cell sizes use the exact polygon coupling
 #: (the midpoint rule overestimates by about (size / distance)^2 / 3: 3.7 % for that cell at 3 cell
 #: sizes, under 1 % beyond 6; the total, a mean over many cells, moves far less: DENALI's errors
