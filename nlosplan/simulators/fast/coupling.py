@@ -82,8 +82,20 @@ def _angle(y, x):
 
     XLA's CPU backend computes ``atan2`` one element at a time (~20 ns each, most of the exact near-wall coupling's
     cost); in float32 this is Cephes' ``atanf`` (range reduction to ``[0, tan(pi/8)]``, an odd polynomial: within
-    2e-7 of the exact angle, float32's own rounding) in plain arithmetic that vectorises. Other dtypes (the float64
-    references, derivative tests) keep ``jnp.arctan2``.
+    3e-7 of the exact angle, float32's own rounding, and ~2.5 ns) in plain arithmetic that vectorises. Other dtypes
+    (the float64 references, derivative tests) keep ``jnp.arctan2``.
+
+    Parameters
+    ----------
+    y : array, shape (...)
+        The sine side, >= 0 (here ``|a x b|``).
+    x : array, shape (...)
+        The cosine side (here ``a . b``).
+
+    Returns
+    -------
+    array, shape (...)
+        The angle, radians.
     """
     if y.dtype != jnp.float32:
         return jnp.arctan2(y, x)
