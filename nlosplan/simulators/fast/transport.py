@@ -41,7 +41,7 @@ from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import (RowPattern, bin_nodes_without_irf, deposit, deposit_at, deposit_method,
                                               irf_matrix, sum_convolve)
 from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
-from nlosplan.simulators.fast.coupling import far_coupling, polygon_coupling
+from nlosplan.simulators.fast.coupling import _dot, far_coupling, polygon_coupling
 
 #: Elevations (of the object-to-wall ray above the wall plane) below this many lobe sigmas hold the lobe spread.
 GRAZING_SIGMAS = 3.0
@@ -119,14 +119,9 @@ def _minus(v, b):
     return tuple(v[k] - b[:, k, None] for k in range(3))
 
 
-def _dot(v, d):
-    """``v . d`` for ``v`` a tuple of 3 arrays and ``d`` a direction (3,)."""
-    return v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
-
-
 def _norm(v):
     """Length of a vector given as a tuple of 3 arrays."""
-    return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return jnp.sqrt(_dot(v, v))
 
 
 def _near_path(a, leg: str, x, near, path):
