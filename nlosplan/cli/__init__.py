@@ -17,6 +17,7 @@ import importlib
 
 from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
 from nlosplan.errors import UserError
+from nlosplan.resources import keep_freed_memory
 
 __all__ = ["EXIT_USAGE", "ROOMS", "build_parser", "main"]
 
@@ -56,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
+        keep_freed_memory()  # training and simulation loops reuse their freed arrays (see the function)
         func = getattr(args, "func", None)
         if func is None:
             raise UserError(f"give a command: {', '.join(ROOMS)} (see 'nlosplan --help')")
