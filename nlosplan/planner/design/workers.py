@@ -38,8 +38,8 @@ def _exit_with_parent(parent: int) -> None:
 def init_worker(parent: int | None = None) -> None:
     """Worker start-up: one thread per worker (the pool provides the parallelism); end with ``parent``.
 
-    Also keeps freed memory for reuse (:func:`~nlosplan.resources.keep_freed_memory`): a learner's
-    training steps ran 1.4-1.6x as fast without a page fault per page of every activation.
+    Also keeps freed memory for reuse (:func:`~nlosplan.resources.keep_freed_memory`): half the page
+    faults, and 9-18 % less time in the ideal observer's evaluations.
     """
     if parent is not None:
         _exit_with_parent(parent)
