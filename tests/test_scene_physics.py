@@ -99,7 +99,7 @@ def test_bad_reflectance_parameters_are_one_line_errors(kw, message):
 
 
 def test_fidelity_knob_for_the_diffuse_base_is_validated():
-    assert FIDELITY_LEVELS["default"].diffuse_samples == 128
+    assert FIDELITY_LEVELS["default"].diffuse_samples == 32
     assert all(a.diffuse_samples <= b.diffuse_samples for a, b in zip(list(FIDELITY_LEVELS.values()),
                                                                       list(FIDELITY_LEVELS.values())[1:]))
     with pytest.raises(UserError, match="diffuse_samples=0 must be an integer >= 1"):

@@ -29,7 +29,10 @@ class Fidelity:
     diffuse_samples : int
         Surface samples of the diffuse (Lambertian) base of a retroreflective
         object: its return is ~7 % of an equal-albedo retroreflector's, so it
-        needs fewer samples for the same error of the whole signal.
+        needs fewer samples for the same error of the whole signal (at the
+        calibrated mix, 2.3-10 % of the signal: 32 samples against 128 add
+        0.02 percentage points to the mean error of 24 positions, at most
+        0.08, and the mixed model runs 1.3-1.5x as fast).
     time_oversample : int
         Time-grid nodes per sensor bin.
     seed : int
@@ -42,7 +45,7 @@ class Fidelity:
     object_samples: int = 384
     time_oversample: int = 4
     seed: int = 0
-    diffuse_samples: int = 128
+    diffuse_samples: int = 32
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -70,9 +73,9 @@ class Fidelity:
 #: geometric in width from the zone pitch) set their error: 4 outer cells at default gave 2.7 %.
 FIDELITY_LEVELS: dict[str, Fidelity] = {
     "draft": Fidelity(zone_sub=2, flash_sub=2, flash_outer=4, object_samples=64, time_oversample=2,
-                      diffuse_samples=32),
+                      diffuse_samples=16),
     "low": Fidelity(zone_sub=3, flash_sub=3, flash_outer=6, object_samples=256, time_oversample=4,
-                    diffuse_samples=64),
+                    diffuse_samples=32),
     "default": Fidelity(),
     "high": Fidelity(zone_sub=6, flash_sub=8, flash_outer=12, object_samples=1536, time_oversample=4,
                      diffuse_samples=512),
