@@ -106,7 +106,7 @@ def _faults_per_round(job) -> dict:
 
 def test_workers_reuse_freed_memory_instead_of_faulting_it_in_again():
     # glibc hands a freed 1 MiB block back to the kernel and faults 256 fresh pages in for the next one; a design
-    # worker keeps it (nlosplan.resources.keep_freed_memory): a training step's arrays cost no page faults
+    # worker keeps it (nlosplan.resources.keep_freed_memory): the ideal observer's blocks cost no page faults again
     pool = PoolExecutor(1)
     try:
         (_, res), = list(pool.map(_faults_per_round, [_Probe()]))
