@@ -135,3 +135,24 @@ def test_keep_freed_memory_reports_whether_it_is_in_force(monkeypatch):
     monkeypatch.setenv("NLOSPLAN_KEEP_FREED_MEMORY", "0")
     off = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert on == ["True", "True"] and off == ["False", "False"]
+
+
+def _torch_state(job) -> dict:
+    import sys
+
+    imported = "torch" in sys.modules
+    import torch
+
+    return {"imported_at_start": imported, "torch": torch.get_num_threads()}
+
+
+def test_workers_import_torch_only_when_a_job_does_and_then_with_one_thread(monkeypatch):
+    # a worker that only simulates (the references) does not pay torch's import; one that trains gets one
+    # thread even when the parent's environment asks for more
+    monkeypatch.setenv("OMP_NUM_THREADS", "4")
+    pool = PoolExecutor(1)
+    try:
+        (_, res), = list(pool.map(_torch_state, [_Probe()]))
+    finally:
+        pool.close()
+    assert res == {"imported_at_start": False, "torch": 1}
