@@ -86,6 +86,16 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     assert len(cleared) == 3
 
 
+def _in_one_worker(fn) -> dict:
+    """``fn``'s result from a fresh design worker (a pool of one, closed after)."""
+    pool = PoolExecutor(1)
+    try:
+        (_, res), = list(pool.map(fn, [_Probe()]))
+    finally:
+        pool.close()
+    return res
+
+
 def _faults_per_round(job) -> dict:
     """Minor page faults of allocating and freeing four 1 MiB arrays, per round (after a warm-up)."""
     import resource
@@ -107,22 +117,14 @@ def _faults_per_round(job) -> dict:
 def test_workers_reuse_freed_memory_instead_of_faulting_it_in_again():
     # glibc hands a freed 1 MiB block back to the kernel and faults 256 fresh pages in for the next one; a design
     # worker keeps it (nlosplan.resources.keep_freed_memory): the ideal observer's blocks cost no page faults again
-    pool = PoolExecutor(1)
-    try:
-        (_, res), = list(pool.map(_faults_per_round, [_Probe()]))
-    finally:
-        pool.close()
+    res = _in_one_worker(_faults_per_round)
     assert res["faults"] < 20, res
 
 
 def test_without_keeping_freed_memory_the_same_loop_faults_every_page(monkeypatch):
     # the control: the measurement above can fail (NLOSPLAN_KEEP_FREED_MEMORY=0 leaves glibc's defaults)
     monkeypatch.setenv("NLOSPLAN_KEEP_FREED_MEMORY", "0")
-    pool = PoolExecutor(1)
-    try:
-        (_, res), = list(pool.map(_faults_per_round, [_Probe()]))
-    finally:
-        pool.close()
+    res = _in_one_worker(_faults_per_round)
     assert res["faults"] > 4 * 200, res  # four arrays of 256 pages each, nearly every page again
 
 
@@ -150,9 +152,5 @@ def test_workers_import_torch_only_when_a_job_does_and_then_with_one_thread(monk
     # a worker that only simulates (the references) does not pay torch's import; one that trains gets one
     # thread even when the parent's environment asks for more
     monkeypatch.setenv("OMP_NUM_THREADS", "4")
-    pool = PoolExecutor(1)
-    try:
-        (_, res), = list(pool.map(_torch_state, [_Probe()]))
-    finally:
-        pool.close()
+    res = _in_one_worker(_torch_state)
     assert res == {"imported_at_start": False, "torch": 1}
