@@ -188,7 +188,8 @@ def _child() -> int:
                 else Path(cfg["planner_dir"]), run_id=cfg["run_id"], actions=cfg["actions"], token=cfg["token"])
     parent = int(cfg["parent"])
     try:
-        sig = serve(sock, page, poll_ms=cfg["poll_ms"], stop=lambda: os.getppid() != parent)
+        sig = serve(sock, page, poll_ms=cfg["poll_ms"], stop=lambda: os.getppid() != parent,
+                    log_prefix="nlosplan: live page")
     except UserError as exc:
         print(f"nlosplan: live page: {exc}", file=sys.stderr)
         return 2

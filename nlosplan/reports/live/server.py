@@ -219,7 +219,8 @@ def _too_many(doc, page: Page) -> bool:
 
 
 def serve(sock: socket.socket, page: Page, *, poll_ms: int = 1000, stop: Callable[[], bool] | None = None,
-          on_ready: Callable[[], None] | None = None, allow_origins=(), log_stream=None) -> int | None:
+          on_ready: Callable[[], None] | None = None, allow_origins=(), log_stream=None,
+          log_prefix: str = "nlosplan serve") -> int | None:
     """Serve ``page`` on a bound socket until ``stop()`` returns true (polled every second), SIGTERM or SIGINT.
 
     Parameters
@@ -237,6 +238,8 @@ def serve(sock: socket.socket, page: Page, *, poll_ms: int = 1000, stop: Callabl
     log_stream : file, optional
         Where the server's log lines go (default: stderr); one line each, the token redacted
         (:func:`~nlosplan.reports.live.logs.server_logs`).
+    log_prefix : str
+        What each log line starts with.
 
     Returns
     -------
@@ -289,7 +292,7 @@ def serve(sock: socket.socket, page: Page, *, poll_ms: int = 1000, stop: Callabl
         build_rig_document(doc, watch, approval=panel if page.planner_dir is not None else None, poll_ms=poll_ms)
 
     stopped_by: list[int] = []
-    with server_logs([page.token] if page.token else [], stream=log_stream):
+    with server_logs([page.token] if page.token else [], stream=log_stream, prefix=log_prefix):
         aloop = asyncio.new_event_loop()
         asyncio.set_event_loop(aloop)
         loop = IOLoop.current()
