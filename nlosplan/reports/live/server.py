@@ -29,8 +29,8 @@ from typing import Callable
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_SESSIONS", "POLL_RANGE_S", "Page", "bind", "is_loopback", "page_url", "parse_origin", "serve",
-           "websocket_origins"]
+__all__ = ["CHECK_UNUSED_S", "MAX_MESSAGE_BYTES", "MAX_SESSIONS", "POLL_RANGE_S", "UNUSED_SESSION_S", "Page", "bind",
+           "is_loopback", "page_url", "parse_origin", "serve", "websocket_origins"]
 
 
 #: ``--poll`` (seconds between reads of the run's files): from 0.05 s (20 reads a second) to an hour.
