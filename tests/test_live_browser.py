@@ -287,3 +287,71 @@ def test_rig_run_is_approved_edited_and_refused_on_the_page(browser, tmp_path):
         assert "answered on the live page: refuse" in "".join(srv.err)
     finally:
         srv.stop()
+
+
+# ---------------------------------------------------------------------------------------------- hostile files
+RUN_XSS = "<img src=x onerror=alert(3)>"          # the issue's reproduction
+FOLDER_XSS = "<img src=x onerror=alert(4)>"       # a store's folder (no '/': a name a folder can have)
+NOTE_XSS = "<svg onload=alert(5)>"
+DESIGN_XSS = "<svg onload=alert(6)>"
+
+
+def assert_nothing_ran(page, dialogs):
+    """No dialog opened and no element of the hostile strings exists (open shadow roots searched too)."""
+    time.sleep(1.0)   # an onerror fires as soon as the element is made; give it a moment
+    assert dialogs == []
+    assert page.locator("[onerror], [onload], img[src=x]").count() == 0
+
+
+def test_hostile_run_id_store_path_and_approval_note_show_as_text(browser, tmp_path):
+    """``nlosplan rig capture ... --run '<img src=x onerror=alert(3)>'`` into a folder with such a name, a
+    'rig run' folder whose last answer came from a hostile peer, served with the token (the page that could
+    approve): every string shows literally, nothing runs."""
+    from nlosplan.planner.capture.approval import Answer, close_request, post_request
+
+    folder = tmp_path / FOLDER_XSS
+    folder.mkdir()
+    store = folder / "s.db"
+    subprocess.run([sys.executable, "-m", "nlosplan", "rig", "capture", "--emulate", "--plan", "raster",
+                    "--positions", "0", "--repeats", "1", "--run", RUN_XSS, "--store", str(store)], check=True,
+                   env=ENV, capture_output=True, timeout=WAIT_MS / 1000)
+    run = tmp_path / "run"
+    req = post_request(run, run_id=RUN_XSS, batch=0, ids=["c00000"])
+    close_request(run, req, Answer("refuse", by=NOTE_XSS), note=RUN_XSS)
+    (tmp_path / "token").write_text("browser-test-token-1\n")
+    srv = Server(["serve", str(store), "--planner", str(run), "--port", "0", "--token-file", str(tmp_path / "token")])
+    try:
+        assert srv.url.endswith("?token=browser-test-token-1")
+        page = browser.new_page()
+        dialogs = []
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.goto(srv.url)
+        page.wait_for_selector("[data-k=run]")
+        assert text_of(page, "run") == RUN_XSS
+        assert f"capture store {store}" in page.locator(".nl-status").first.inner_text()
+        page.wait_for_selector("[data-k=note]")
+        assert (text_of(page, "answered_by"), text_of(page, "note")) == (NOTE_XSS, RUN_XSS)
+        assert page.title() == f"nlosplan rig · {RUN_XSS}"
+        assert_nothing_ran(page, dialogs)
+        screenshot(page, tmp_path, "live_rig_hostile.png")
+    finally:
+        srv.stop()
+    assert "browser-test-token-1" not in "".join(srv.err).split("\n", 1)[1]   # only the first line has the URL
+
+
+def test_hostile_design_folder_and_label_show_as_text(browser, tmp_path):
+    out = tmp_path / DESIGN_XSS
+    out.mkdir()
+    (out / "design_checkpoint.json").write_text(json.dumps({"config": {"label": NOTE_XSS}, "candidates": None}))
+    srv = Server(["serve", str(out), "--port", "0"])
+    try:
+        page = browser.new_page()
+        dialogs = []
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.goto(srv.url)
+        page.wait_for_selector("[data-k=folder]")
+        assert (text_of(page, "folder"), text_of(page, "label")) == (str(out), NOTE_XSS)
+        assert text_of(page, "progress_error").startswith(f"{out}/design_checkpoint.json")   # the folder again
+        assert_nothing_ran(page, dialogs)
+    finally:
+        srv.stop()

@@ -135,7 +135,8 @@ EXAMPLES = {
     "serve": (
         "nlosplan serve nlosplan-out/design                # the design page (a run in progress or finished)",
         "nlosplan serve runs.db --planner nlosplan-out/rig-run   # the rig page; approve batches of 'rig run --approve'",
-        "nlosplan serve archive/denali.sqlite --host 0.0.0.0 --read-only --port 8060",
+        "nlosplan serve runs.db --planner nlosplan-out/rig-run --token-file ~/.rig-token   # your token, not in ps",
+        "nlosplan serve archive/denali.sqlite --host 0.0.0.0 --read-only --port 8060 --allow-origin rig-pc:8060",
     ),
     "sensor list": "nlosplan sensor list",
     "sensor show": "nlosplan sensor show tmf8828-3x3-short --json",

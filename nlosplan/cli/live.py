@@ -171,7 +171,8 @@ def ask_approval(request: dict, out, *, live: bool, stdin=None, poll_s: float = 
 
 
 def _child() -> int:
-    """The page's process: settings from stdin, the inherited socket, served until the parent ends."""
+    """The page's process: settings from stdin, the inherited socket, served until the parent ends or
+    stops it (SIGTERM, taken by the server's event loop between callbacks: exit 143)."""
     import socket
 
     from nlosplan.reports.live.server import Page, serve
@@ -187,21 +188,13 @@ def _child() -> int:
                 else Path(cfg["planner_dir"]), run_id=cfg["run_id"], actions=cfg["actions"], token=cfg["token"])
     parent = int(cfg["parent"])
     try:
-        serve(sock, page, poll_ms=cfg["poll_ms"], stop=lambda: os.getppid() != parent)
+        sig = serve(sock, page, poll_ms=cfg["poll_ms"], stop=lambda: os.getppid() != parent,
+                    log_prefix="nlosplan: live page")
     except UserError as exc:
         print(f"nlosplan: live page: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 0
-    return 0
-
-
-def _terminated(signum, frame):
-    raise KeyboardInterrupt
+    return 0 if sig is None else 128 + int(sig)   # the run's SIGTERM at its end: 143
 
 
 if __name__ == "__main__":
-    import signal
-
-    signal.signal(signal.SIGTERM, _terminated)
     sys.exit(_child())

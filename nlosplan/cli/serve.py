@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+import re
 import secrets
 import sys
 from pathlib import Path
 
-from nlosplan.cli.common import int_type, number_type, sub_parser
+from nlosplan.cli.common import int_type, sub_parser
 from nlosplan.errors import UserError
 
 DEFAULT_PORT = 8050
@@ -28,9 +29,13 @@ run goes on (a finished run's page shows its end). PATH is:
 The page reads the files (SQLite read-only) and writes nothing, except an
 answer to the approval gate. Safety: it listens on 127.0.0.1 unless --host says
 otherwise; approving, editing or refusing a batch (which moves the gantry) needs
-the token of the URL printed here; a store that cannot be written (an archive)
-and --read-only give pages without actions. --live on design, rig capture and
-rig run starts the same page for the run in progress."""
+the token of the URL printed here (a new random one, or yours from --token-file
+or --token - on stdin; never on the command line, where ps shows it); a store
+that cannot be written (an archive) and --read-only give pages without actions.
+Only pages opened at the address served (and --allow-origin ones) can talk to
+the server; whatever the run's files hold is shown as text. SIGTERM or Ctrl-C
+stop it (exit 143 or 130). --live on design, rig capture and rig run starts the
+same page for the run in progress."""
 
 
 def _host(text: str) -> str:
@@ -88,37 +93,104 @@ def with_token(page, host: str, token: str | None, no_token: bool):
     return replace(page, token=token or secrets.token_urlsafe(16))
 
 
-def _cmd_serve(args) -> int:
-    from nlosplan.reports.live.server import bind, page_url, serve
+TOKEN_CHARS = re.compile(r"[A-Za-z0-9._~-]{8,256}")
 
-    if args.token is not None and args.no_token:
-        raise UserError("--token and --no-token exclude each other")
-    if args.token is not None and len(args.token) < 8:
-        raise UserError("--token must have at least 8 characters")
-    page = with_token(resolve_page(args.path, planner=args.planner, run=args.run, read_only=args.read_only),
-                      args.host, args.token, args.no_token)
+
+def _poll(text: str) -> float:
+    """``--poll S``: a finite number of seconds within :data:`~nlosplan.reports.live.server.POLL_RANGE_S`."""
+    import argparse
+
+    from nlosplan.reports.live.server import POLL_RANGE_S
+
+    lo, hi = POLL_RANGE_S
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not lo <= value <= hi:   # NaN fails too
+        raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: {lo:g} to {hi:g} seconds")
+    return value
+
+
+def read_token(token_arg: str | None, token_file: str | None, *, stdin=None) -> str | None:
+    """The token actions need, from stdin (``--token -``) or a file (``--token-file PATH``); None: neither.
+
+    A token on the command line (``--token VALUE``) is refused: every user of the machine can read it with
+    ``ps``. The first line is the token (surrounding blanks dropped): 8 to 256 characters a URL carries as
+    they are (letters, digits, ``. _ ~ -``). No message shows the token.
+
+    Raises
+    ------
+    UserError
+    """
+    stdin = sys.stdin if stdin is None else stdin
+    if token_arg is not None and token_arg != "-":
+        raise UserError("--token VALUE on the command line can be read by every user of this machine (ps): "
+                        "give --token - and type or pipe it on stdin, or --token-file PATH")
+    if token_arg is not None and token_file is not None:
+        raise UserError("--token - and --token-file exclude each other")
+    if token_file is not None:
+        try:
+            with open(token_file, "rb") as fh:   # a pipe (--token-file <(pass show rig)) works too
+                text = fh.read(4096).decode("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else "not UTF-8 text"
+            raise UserError(f"--token-file {token_file}: cannot read it ({why})") from None
+        where = f"--token-file {token_file}"
+    elif token_arg == "-":
+        if getattr(stdin, "isatty", lambda: False)():
+            import getpass
+
+            text = getpass.getpass("token (not shown): ")
+        else:
+            text = stdin.readline()
+        where = "--token - (stdin)"
+    else:
+        return None
+    lines = text.strip().splitlines()
+    token = lines[0].strip() if lines else ""
+    if not token:
+        raise UserError(f"{where}: no token in it")
+    if not TOKEN_CHARS.fullmatch(token):
+        raise UserError(f"{where}: the token must have 8 to 256 characters, each a letter, a digit or one of . _ ~ -"
+                        f" (this one has {len(token)} characters)")
+    return token
+
+
+def _cmd_serve(args) -> int:
+    from nlosplan.reports.live.server import bind, is_loopback, page_url, parse_origin, serve, websocket_origins
+
+    if (args.token is not None or args.token_file is not None) and args.no_token:
+        raise UserError(f"{'--token' if args.token is not None else '--token-file'} and --no-token exclude each other")
+    if args.token is not None and (args.token != "-" or args.token_file is not None):
+        read_token(args.token, args.token_file)   # refused: a token in argv, or two sources
+    for text in args.allow_origin:
+        parse_origin(text, 1)                   # the syntax, before anything else
+    page = resolve_page(args.path, planner=args.planner, run=args.run, read_only=args.read_only)
+    if not page.actions and (args.token is not None or args.token_file is not None):
+        raise UserError(f"{'--token' if args.token is not None else '--token-file'} applies only to a page with "
+                        "actions: a store with --planner (or a 'rig run' folder), without --read-only")
+    token = read_token(args.token, args.token_file)
+    page = with_token(page, args.host, token, args.no_token)
     sock = bind(args.host, args.port)
     port = sock.getsockname()[1]
+    allow = [parse_origin(text, port) for text in args.allow_origin]
     what = f"design page of {page.path}" if page.kind == "design" else f"rig page of {page.path}"
     print(f"nlosplan serve: {what} at {page_url(args.host, port, page.token)}  (Ctrl-C to stop)", file=sys.stderr,
           flush=True)
     if page.actions and page.token:
         print("nlosplan serve: approving, editing or refusing a batch needs the token in this URL; keep it private",
               file=sys.stderr, flush=True)
+    if allow or not is_loopback(args.host):
+        print("nlosplan serve: pages may connect from " + ", ".join(websocket_origins(args.host, port, allow))
+              + " (add an address with --allow-origin HOST:PORT)", file=sys.stderr, flush=True)
+    sig = serve(sock, page, poll_ms=max(1, round(1000 * args.poll)), allow_origins=allow)
+    if sig is None:
+        return 0
     import signal
 
-    def _stop(signum, frame):
-        raise KeyboardInterrupt
-
-    try:
-        signal.signal(signal.SIGTERM, _stop)   # a service manager's stop ends it like Ctrl-C
-    except ValueError:                          # not the main thread (an embedding program's): keep its handler
-        pass
-    try:
-        serve(sock, page, poll_ms=int(1000 * args.poll))
-    except KeyboardInterrupt:
-        pass
-    return 0
+    print(f"nlosplan serve: stopped ({signal.Signals(sig).name})", file=sys.stderr, flush=True)
+    return 128 + int(sig)   # 143 after SIGTERM, 130 after Ctrl-C, as a shell reports a process a signal ended
 
 
 def add(sub) -> None:
@@ -133,12 +205,20 @@ def add(sub) -> None:
                    help="address to listen on (default: %(default)s, this machine only; 0.0.0.0: every interface)")
     p.add_argument("--port", type=int_type(0, 65535), default=DEFAULT_PORT,
                    help="TCP port (default: %(default)s; 0: any free port)")
-    p.add_argument("--token", default=None, help="the token actions need (default: a new random one, printed)")
+    p.add_argument("--token", default=None, metavar="-",
+                   help="'-': read the token actions need from stdin (typed, not shown, or piped); default: a new "
+                        "random one, printed in the URL. A token given on the command line is refused (ps shows it)")
+    p.add_argument("--token-file", default=None, metavar="PATH",
+                   help="read the token from the first line of this file (keep it private: chmod 600)")
     p.add_argument("--no-token", action="store_true", help="actions without a token (only on a loopback --host)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="HOST[:PORT]",
+                   help="also let pages opened at this address talk to the server (repeatable; PORT: the one "
+                        "served). Default: only the address served (every interface: the loopback names and this "
+                        "machine's name); never a wildcard")
     p.add_argument("--read-only", action="store_true", help="no actions, whatever the store")
-    p.add_argument("--poll", type=number_type(float), default=1.0, metavar="S",
-                   help="seconds between reads of the files (default: 1)")
+    p.add_argument("--poll", type=_poll, default=1.0, metavar="S",
+                   help="seconds between reads of the files, 0.05 to 3600 (default: 1)")
     p.set_defaults(func=_cmd_serve)
 
 
-__all__ = ["add", "resolve_page", "with_token", "DEFAULT_PORT"]
+__all__ = ["add", "read_token", "resolve_page", "with_token", "DEFAULT_PORT"]

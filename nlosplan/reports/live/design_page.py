@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from nlosplan.reports.live.design_watch import DesignWatch, _design_key
-from nlosplan.reports.live.html import STYLE, duration, fmt, table
+from nlosplan.reports.live.html import STYLE, duration, esc, fmt, table
 
 __all__ = ["build_design_document", "status_html", "answer_rows"]
 
@@ -43,27 +43,32 @@ def _x_of(design: dict, axis: str, cost: float | None):
 
 
 def status_html(watch: DesignWatch) -> str:
-    """The status block: folder, stage, evaluations done / left, time left, failures."""
+    """The status block: folder, stage, evaluations done / left, time left, failures (every value from the
+    run's files or a flag escaped)."""
     from nlosplan.planner.design.progress import STAGES
 
     p = watch.progress
-    lines = [f"<b>design run</b> {watch.out} {('(' + watch.label + ')') if watch.label else ''}"]
+    label = f"(<span data-k='label'>{esc(watch.label)}</span>)" if watch.label else ""
+    lines = [f"<b>design run</b> <span data-k='folder'>{esc(watch.out)}</span> {label}"]
     if p is None:
-        lines.append(f"<span class='nl-warn'>progress unknown: {watch.progress_error}</span>")
+        lines.append(f"<span class='nl-warn'>progress unknown: <span data-k='progress_error'>"
+                     f"{esc(watch.progress_error)}</span></span>")
         lines.append(f"evaluations logged: <span data-k='done'>{len(watch.results)}</span>")
     else:
-        stages = " → ".join(f"<b data-k='stage'>{s}</b>" if s == p["stage"] else s for s in STAGES)
+        stages = " → ".join(f"<b data-k='stage'>{esc(s)}</b>" if s == p["stage"] else esc(s) for s in STAGES)
         lines.append(f"stage: {stages}")
-        left = ", ".join(f"{k} {v}" for k, v in sorted(p["left_by_evaluator"].items()))
-        lines.append(f"evaluations done <b data-k='done'>{p['done']}</b> · left in this stage "
-                     f"<b data-k='left'>{p['left']}</b>{' (' + left + ')' if left else ''} · planned so far "
-                     f"<b data-k='planned'>{p['done'] + p['left']}</b> (later stages are planned when they start)")
+        left = ", ".join(f"{esc(k)} {esc(v)}" for k, v in sorted(p["left_by_evaluator"].items()))
+        lines.append(f"evaluations done <b data-k='done'>{esc(p['done'])}</b> · left in this stage "
+                     f"<b data-k='left'>{esc(p['left'])}</b>{' (' + left + ')' if left else ''} · planned so far "
+                     f"<b data-k='planned'>{esc(p['done'] + p['left'])}</b> (later stages are planned when they "
+                     "start)")
         secs = watch.seconds_left()
         eta = duration(secs) if secs is not None else ("—" if not p["left"] else "estimating (needs evaluations "
                                                                                  "landing while the page watches)")
         lines.append(f"time left in this stage: <b data-k='eta'>{eta}</b>")
         failed = p["failed"]
-        lines.append(f"failed evaluations: <b data-k='failed' class='{'nl-warn' if failed else 'nl-ok'}'>{failed}</b>")
+        lines.append(f"failed evaluations: <b data-k='failed' class='{'nl-warn' if failed else 'nl-ok'}'>"
+                     f"{esc(failed)}</b>")
     since = watch.seconds_since_last()
     state = "finished (result.json written)" if watch.result is not None and watch.answer() is watch.result \
         else f"running or stopped; last evaluation {duration(since)} ago" if since is not None else "no evaluation yet"

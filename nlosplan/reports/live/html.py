@@ -1,4 +1,12 @@
-"""Small HTML pieces of the live pages: tables of whatever rows a file holds, numbers, durations."""
+"""Small HTML pieces of the live pages: the one escaping helper, tables of whatever rows a file holds, numbers,
+durations.
+
+Every text a live page puts into a Bokeh ``Div`` (whose HTML BokehJS renders with ``innerHTML``) that came
+from a file, a flag, a store or a peer (run ids, object names, failure reasons, paths, the approval's note
+and who answered, a design folder and label, error messages) goes through :func:`esc` first; only the
+markup the page itself writes is left as it is. Attribute values are always quoted (``title="..."``,
+``data-col="..."``) and escaped with the quotes; no page builds JavaScript from strings.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +14,24 @@ import html
 import json
 import math
 
-__all__ = ["duration", "fmt", "table"]
+__all__ = ["duration", "esc", "fmt", "table"]
+
+
+def esc(value) -> str:
+    """``value`` as text safe inside HTML: ``& < > " '`` escaped (for element text and quoted attributes).
+
+    Parameters
+    ----------
+    value : object
+        Anything; shown as ``str(value)`` (format it first with :func:`fmt` where a number is meant).
+
+    Returns
+    -------
+    str
+        The text with ``&``, ``<``, ``>``, ``"`` and ``'`` as character references, so a run id such as
+        ``<img src=x onerror=alert(1)>`` shows as these characters and never becomes an element.
+    """
+    return html.escape(str(value), quote=True)
 
 
 def fmt(v) -> str:
@@ -49,21 +74,21 @@ def table(rows: list[dict], *, name: str, columns: list[str] | None = None, drop
     ``limit`` characters (the whole text in the cell's title).
     """
     if not rows:
-        return f'<table class="nl-table" data-name="{name}"><tr><td>none yet</td></tr></table>'
+        return f'<table class="nl-table" data-name="{esc(name)}"><tr><td>none yet</td></tr></table>'
     if columns is None:
         columns = []
         for r in rows:
             columns += [k for k in r if k not in columns and k not in drop]
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
+    head = "".join(f"<th>{esc(c)}</th>" for c in columns)
     body = []
     for r in rows:
         cells = []
         for c in columns:
             text = fmt(r.get(c))
             short = text if len(text) <= limit else text[: limit - 1] + "…"
-            cells.append(f'<td data-col="{html.escape(str(c))}" title="{html.escape(text)}">{html.escape(short)}</td>')
+            cells.append(f'<td data-col="{esc(c)}" title="{esc(text)}">{esc(short)}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return (f'<table class="nl-table" data-name="{name}"><thead><tr>{head}</tr></thead>'
+    return (f'<table class="nl-table" data-name="{esc(name)}"><thead><tr>{head}</tr></thead>'
             f'<tbody>{"".join(body)}</tbody></table>')
 
 

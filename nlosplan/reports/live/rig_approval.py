@@ -17,7 +17,7 @@ import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.planner.capture.approval import Answer, submit_answer
-from nlosplan.reports.live.html import STYLE, table
+from nlosplan.reports.live.html import STYLE, esc, table
 
 __all__ = ["ApprovalPanel", "snap_radius_mm"]
 
@@ -93,17 +93,17 @@ class ApprovalPanel:
         pend = self.watch.pending()
         if req is None:
             last = self.watch.approval
-            done = ("" if not last else f"batch {last.get('batch')} was answered: <b data-k='decision'>"
-                    f"{last.get('decision')}</b> by {last.get('answered_by')}"
-                    + (f" ({last.get('note')})" if last.get("note") else ""))
+            done = ("" if not last else f"batch {esc(last.get('batch'))} was answered: <b data-k='decision'>"
+                    f"{esc(last.get('decision'))}</b> by <span data-k='answered_by'>{esc(last.get('answered_by'))}"
+                    "</span>" + (f" (<span data-k='note'>{esc(last.get('note'))}</span>)" if last.get("note") else ""))
             self.status.text = STYLE + f"<div class='nl-status'>no batch awaits approval. {done}</div>"
         else:
-            who = "" if self.allowed else f"<br><span class='nl-warn'>read-only: {self.why_not}</span>"
-            sent = f"<br><b class='nl-ok'>sent: {self.sent}</b> — waiting for the run" if self.sent else ""
-            msg = f"<br><span class='nl-warn'>{self.message}</span>" if self.message else ""
-            self.status.text = (STYLE + f"<div class='nl-status'><b data-k='awaiting'>batch {req['batch']} awaits "
-                                f"approval</b> ({len(req['ids'])} positions; budget leaves "
-                                f"{req.get('budget_left', '?')} more). Click a proposed position on the map to drop "
+            who = "" if self.allowed else f"<br><span class='nl-warn'>read-only: {esc(self.why_not)}</span>"
+            sent = f"<br><b class='nl-ok'>sent: {esc(self.sent)}</b> — waiting for the run" if self.sent else ""
+            msg = f"<br><span class='nl-warn'>{esc(self.message)}</span>" if self.message else ""
+            self.status.text = (STYLE + f"<div class='nl-status'><b data-k='awaiting'>batch {esc(req['batch'])} "
+                                f"awaits approval</b> ({len(req['ids'])} positions; budget leaves "
+                                f"{esc(req.get('budget_left', '?'))} more). Click a proposed position on the map to drop "
                                 f"it, a free candidate to add it.{who}{sent}{msg}</div>")
         rows = [{"#": k + 1, "id": p["id"], "x_mm": round(p["x_mm"], 1), "y_mm": round(p["y_mm"], 1),
                  "edit": "drop" if p["id"] in self.drop else ""} for k, p in enumerate(pend)]

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from nlosplan.reports.live.html import STYLE, duration, fmt, table
+from nlosplan.reports.live.html import STYLE, duration, esc, fmt, table
 from nlosplan.reports.live.rig_watch import IDLE_AFTER_S, RigWatch
 
 __all__ = ["build_rig_document", "status_html"]
@@ -23,45 +23,48 @@ MAX_LINE_ZONES = 16
 
 
 def status_html(watch: RigWatch) -> str:
-    """The status block: store, run, captures stored / planned / left, faults, state."""
+    """The status block: store, run, captures stored / planned / left, faults, state (every value from the
+    store, the run folder or a flag escaped)."""
     run = watch.run_id
-    lines = [f"<b>capture store</b> {watch.store}" + ("" if watch.writable or not watch.opened else
+    lines = [f"<b>capture store</b> {esc(watch.store)}" + ("" if watch.writable or not watch.opened else
                                                        " <span class='nl-warn'>(read-only: archived)</span>")]
     if not watch.opened:
         lines.append("waiting for the run to create the store")
         return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
     if run is None:
-        lines.append(f"no rig run in this store yet ({watch.total} captures of other sources)")
+        lines.append(f"no rig run in this store yet ({esc(watch.total)} captures of other sources)")
         return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
     if not watch.runs.get(run):
-        lines.append(f"<b>run</b> <span data-k='run'>{run}</span>: no capture yet")
+        lines.append(f"<b>run</b> <span data-k='run'>{esc(run)}</span>: no capture yet")
         if watch.awaiting():
             lines.append("state: <b data-k='state'>awaiting approval</b>")
         return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
     m, c, f = watch.meta(), watch.counts(), watch.faults()
-    lines.append(f"<b>run</b> <span data-k='run'>{run}</span> · {m.get('object')} {m.get('size')}, "
-                 f"{m.get('zones')} zones, lights {m.get('lights')}, {m.get('source')} · plan: {m.get('plan', '?')}")
-    planned = "?" if c["planned"] is None else c["planned"]
-    left = "?" if c["left"] is None else c["left"]
-    unit = c["planned_unit"]
-    lines.append(f"captures stored <b data-k='captures'>{c['captures']}</b> at <b data-k='positions'>{c['positions']}"
+    lines.append(f"<b>run</b> <span data-k='run'>{esc(run)}</span> · {esc(m.get('object'))} {esc(m.get('size'))}, "
+                 f"{esc(m.get('zones'))} zones, lights {esc(m.get('lights'))}, {esc(m.get('source'))} · plan: "
+                 f"{esc(m.get('plan', '?'))}")
+    planned = "?" if c["planned"] is None else esc(c["planned"])
+    left = "?" if c["left"] is None else esc(c["left"])
+    unit = esc(c["planned_unit"])
+    lines.append(f"captures stored <b data-k='captures'>{esc(c['captures'])}</b> at <b data-k='positions'>"
+                 f"{esc(c['positions'])}"
                  f"</b> positions · planned <b data-k='planned'>{planned}</b> {unit} · left <b data-k='left'>{left}</b> "
                  f"{unit}")
     lines.append("faults: " + " · ".join(
-        f"{label} <b data-k='{k}' class='{'nl-warn' if f[k] else 'nl-ok'}'>{fmt(f[k])}</b>"
+        f"{label} <b data-k='{k}' class='{'nl-warn' if f[k] else 'nl-ok'}'>{esc(fmt(f[k]))}</b>"
         for k, label in (("dropped_frames", "dropped frames"), ("dropped_dumps", "dropped dumps"),
                          ("garbage_lines", "garbage lines"), ("retries", "frame retries"),
                          ("reconnects", "sensor reconnects"), ("failed_captures", "failed positions"))))
     for fail in f["failures"][-3:]:
-        lines.append(f"<span class='nl-warn'>failed {fail.get('id')}: {fail.get('reason')}</span>")
+        lines.append(f"<span class='nl-warn'>failed {esc(fail.get('id'))}: {esc(fail.get('reason'))}</span>")
     since = watch.seconds_since_last()
     pos = watch.current_position()
     lines.append(f"gantry last reported at <b data-k='position'>"
                  f"{'—' if pos is None else f'({pos[0]:.1f}, {pos[1]:.1f}) mm'}</b> · last capture "
                  f"{duration(since)} ago")
     planner = watch.planner or {}
-    state = ("awaiting approval" if watch.awaiting() else f"finished: {planner['finished']}" if planner.get("finished")
-             else "idle or ended" if since is not None and since > IDLE_AFTER_S else "running")
+    state = ("awaiting approval" if watch.awaiting() else f"finished: {esc(planner['finished'])}"
+             if planner.get("finished") else "idle or ended" if since is not None and since > IDLE_AFTER_S else "running")
     lines.append(f"state: <b data-k='state'>{state}</b>")
     return STYLE + "<div class='nl-status'>" + "<br>".join(lines) + "</div>"
 
