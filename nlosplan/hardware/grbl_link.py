@@ -112,11 +112,12 @@ class GrblLink:
     def exchange(self, data: bytes, quiet_s: float = 0.3, timeout: float = 3.0) -> list[str]:
         """Write raw bytes and return every line that comes back until ``quiet_s`` of silence (diagnostics).
 
-        Lines are returned as they are, not interpreted (no exception for ``ALARM:`` or ``error:``).
+        Lines are returned as they are, not interpreted (no exception for ``ALARM:`` or ``error:``). GRBL ends
+        every line with a newline, so a pause inside a line waits for the rest (up to ``timeout``).
         """
         self._write(data)
         try:
-            return self._reader.read_until_quiet(quiet_s, timeout)
+            return self._reader.read_until_quiet(quiet_s, timeout, whole_lines=True)
         except DeviceTimeout:
             return []
 

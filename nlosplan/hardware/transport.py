@@ -128,13 +128,16 @@ class LineReader:
                 raise DeviceTimeout(f"no complete line within {timeout:g} s")
             self._fill()
 
-    def read_until_quiet(self, quiet_s: float, timeout: float) -> list[str]:
+    def read_until_quiet(self, quiet_s: float, timeout: float, *, whole_lines: bool = False) -> list[str]:
         """Lines until the device has been silent for ``quiet_s`` (at most ``timeout`` s).
+
+        With ``whole_lines``, silence in the middle of a line does not end the read (a device slowed by a loaded
+        host can pause between the bytes of one line); only ``timeout`` does.
 
         Returns
         -------
         list of str
-            Complete lines; a trailing partial line is returned too.
+            Complete lines; a trailing partial line (cut by ``timeout``) is returned too.
 
         Raises
         ------
@@ -148,7 +151,7 @@ class LineReader:
             now = time.monotonic()
             if self._fill():
                 last = time.monotonic()
-            elif last is not None and now - last >= quiet_s:
+            elif last is not None and now - last >= quiet_s and not (whole_lines and not self._buf.endswith(b"\n")):
                 break
             if now - start >= timeout:
                 if last is None:
