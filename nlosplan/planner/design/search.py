@@ -30,7 +30,7 @@ learns is kept in a typed evidence store whose read-only face, :attr:`~DesignSea
    the driver simulates the worlds' references the search names (:meth:`~DesignSearch.needed_references`,
    :meth:`~DesignSearch.ingest_references`).
 
-A stage is a member of :class:`Stage` and a method that makes its jobs (:meth:`DesignSearch._stage_jobs`).
+Adding a stage is a member of :class:`Stage` and the method that makes its jobs, listed in ``_stage_jobs``.
 Seeds: evaluation ``i`` of a design uses seed ``seed * 1000 + i`` (``seed``: the run's ``--seed``), so two runs
 with different seeds draw new noise, new splits and new training seeds everywhere.
 """
