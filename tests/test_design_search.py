@@ -8,8 +8,9 @@ import pytest
 from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.jobs import DesignJob
+from nlosplan.planner.design.lines import line_points
 from nlosplan.planner.design.requirements import Requirement, parse_requirement
-from nlosplan.planner.design.search import DesignSearch, SearchConfig
+from nlosplan.planner.design.search import DesignSearch, SearchConfig, Stage
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import pareto_front, summarize
 
@@ -40,8 +41,8 @@ def fake_result(job: DesignJob) -> dict:
 def run(search: DesignSearch, calls: list) -> None:
     while True:
         jobs = search.suggest()
-        if not jobs and search.stage == "optimize":
-            search.set_candidates({}, [])
+        if not jobs and search.stage is Stage.OPTIMIZE:
+            search.ingest_candidates({}, [])
             continue
         if not jobs:
             return
@@ -56,7 +57,7 @@ def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
     calls: list = []
     run(search, calls)
     assert len(calls) == len(set(calls))  # nothing asked twice
-    res = summarize(search)
+    res = summarize(search.evidence)
     rows = {(r["task"], r["parameter"]): r for r in res["requirements"]}
     # localization at 3x3, full photons: rmse = 0.02 (1 + 2 j) <= 0.05  ->  jitter <= 750 ps
     j = rows[("loc", "jitter_fwhm_ps")]
@@ -73,35 +74,36 @@ def test_search_finds_the_analytic_thresholds_and_resumes_without_recomputing():
         assert r["verdict"] in ("met", "not met", "undecided") and r["feasible"] == (r["verdict"] == "met")
         assert ("pessimistic end" in r["note"]) == (r["verdict"] == "undecided")
     # the loc bound (2x optimistic) screens the fewest photons out: never trained there
-    screened = [pt for pt in search.line_points(LOC, "photon_fraction", search.base) if pt["screened"]]
-    assert screened and all(pt["trained"] is None for pt in screened)
+    ev = search.evidence
+    screened = [pt for pt in line_points(ev, LOC, "photon_fraction", ev.base) if pt.screened]
+    assert screened and all(pt.trained is None for pt in screened)
     assert res["gap"][LOC.name]["value"] == pytest.approx(math.log(2), abs=1e-9)
     cheapest = {c["task"]: c for c in res["cheapest"]}
     assert cheapest["loc"]["value"] <= 0.05 and cheapest["loc"]["source"].startswith("scans (not verified")
     assert cheapest["loc"]["verdict"] == "met" and cheapest["loc"]["design"]["zones"] in ("1x1", "3x3")
 
     resumed = DesignSearch(SPACE, [LOC, SIZE], cfg, REFS)
-    for r in search.results.values():
+    for r in ev.records():
         resumed.ingest([r])
     again: list = []
     run(resumed, again)
     assert again == []  # a resumed search asks for nothing already told
-    assert summarize(resumed)["requirements"] == res["requirements"]
+    assert summarize(resumed.evidence)["requirements"] == res["requirements"]
 
 
 def test_failed_evaluations_are_recorded_not_fatal():
     search = DesignSearch(SPACE, [SIZE], SearchConfig(grid_points=3, refine_steps=0, seeds=1), REFS)
     n = 0
-    while (jobs := search.suggest()) or search.stage == "optimize":
+    while (jobs := search.suggest()) or search.stage is Stage.OPTIMIZE:
         if not jobs:
-            search.set_candidates({}, [])
+            search.ingest_candidates({}, [])
             continue
         for j in jobs:
             n += 1
             r = fake_result(j) if n % 3 else {**j.to_dict(), "status": "failed", "reason": "RuntimeError: boom", "value": math.nan,
                                                "lo": math.nan, "hi": math.nan, "seconds": 0.0, "metric": "x"}
             search.ingest([r])
-    res = summarize(search)
+    res = summarize(search.evidence)
     assert res["failures"] and all(f["reason"] == "RuntimeError: boom" for f in res["failures"])
     assert any(r["feasible"] for r in res["requirements"])
 
@@ -163,7 +165,7 @@ def test_observer_bounds_carry_the_thresholds_they_may_stop_at():
 
     size_low = Requirement("size", 0.8)
     search = DesignSearch(SPACE, [LOC, SIZE, size_low], SearchConfig(grid_points=3, seeds=1), REFS)
-    d = search.base
+    d = search.evidence.base
     # the ideal observer of a task stops once clear of every threshold of that task; the Cramér–Rao bound is exact
     assert search.job("bound", SIZE, d).fidelity["stop_at"] == [0.8, 0.9]
     assert search.job("bound", SIZE, d).key == search.job("bound", size_low, d).key  # one job for both
@@ -177,4 +179,5 @@ def test_observer_bounds_carry_the_thresholds_they_may_stop_at():
     assert "stop_at" not in one.job("bound", SIZE, d).fidelity
     # the optimizer's corrected bound is a continuous objective: it draws every capture
     search.ingest([fake_result(j) for j in search.suggest()])
-    assert all("stop_at" not in j.fidelity for j in optimize_jobs(search))
+    assert all("stop_at" not in j.fidelity for j in search.optimize_jobs())
+    assert search.optimize_jobs() == optimize_jobs(search.evidence, lambda req, d: search.job("bound", req, d))

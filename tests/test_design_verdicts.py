@@ -10,10 +10,12 @@ import pytest
 from nlosplan.errors import UserError
 from nlosplan.planner.design import robust
 from nlosplan.planner.design.data import SceneSet
+from nlosplan.planner.design.evaluation import Evaluation
 from nlosplan.planner.design.jobs import DesignJob
+from nlosplan.planner.design.lines import line_points
 from nlosplan.planner.design.optimize import collect_candidates
 from nlosplan.planner.design.requirements import Requirement
-from nlosplan.planner.design.search import DesignSearch, SearchConfig
+from nlosplan.planner.design.search import DesignSearch, SearchConfig, Stage
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.planner.design.summary import summarize
 from nlosplan.planner.design.verdicts import MET, NOT_MET, UNDECIDED, Spread, pooled_spread, seed_interval, verdict
@@ -62,13 +64,13 @@ def drive(search: DesignSearch, fake) -> list[DesignJob]:
     calls = []
     while True:
         jobs = search.suggest()
-        if not jobs and search.stage == "optimize":
-            search.set_candidates(collect_candidates(search, [], search.config.candidates), [])
+        if not jobs and search.stage is Stage.OPTIMIZE:
+            search.ingest_candidates(collect_candidates(search.evidence, [], search.evidence.config.candidates), [])
             continue
-        if not jobs and search.stage == "worlds" and search.worlds is not None:
-            need = robust.needed_references(search)
+        if not jobs and search.stage is Stage.WORLDS:
+            need = search.needed_references()
             if need:
-                search.add_world_references({(w.index, lay): f"world{w.index}_{lay}.npz" for w, lay in need})
+                search.ingest_references({(w.index, lay): f"world{w.index}_{lay}.npz" for w, lay in need})
                 continue
         if not jobs:
             return calls
@@ -84,31 +86,39 @@ def test_verdict_is_three_valued_on_the_interval_ends():
     assert verdict(SIZE, 0.8, 0.89) == NOT_MET
 
 
+def _run(i: int, value: float, half: float = 0.001, status: str = "ok") -> Evaluation:
+    return Evaluation.from_record({"key": str(i), "evaluator": "trained", "task": "loc", "design": Design().to_dict(),
+                                   "seed": i, "value": value, "lo": value - half, "hi": value + half,
+                                   "seconds": 1.0, "status": status})
+
+
 def test_interval_of_the_seed_mean_uses_the_pooled_spread_and_narrows_with_seeds():
-    recs = [{"value": v, "lo": v - 0.001, "hi": v + 0.001, "seconds": 1.0, "status": "ok"}
-            for v in (0.040, 0.046, 0.043, 0.041)]
+    recs = [_run(i, v) for i, v in enumerate((0.040, 0.046, 0.043, 0.041))]
     sp = pooled_spread(LOC, [[0.040, 0.046], [0.030, 0.034, 0.032]])
     assert sp.dof == 3 and sp.designs == 2 and sp.var > 0
     one, four = seed_interval(LOC, recs[:1], sp), seed_interval(LOC, recs, sp)
-    assert one["seeds"] == 1 and four["seeds"] == 4 and four["value"] == pytest.approx(0.0425)
-    w1 = math.log(one["hi"] / one["lo"])
-    w4 = math.log(four["hi"] / four["lo"])
+    assert one.seeds == 1 and four.seeds == 4 and four.value == pytest.approx(0.0425) and four.seconds == 4.0
+    w1 = math.log(one.hi / one.lo)
+    w4 = math.log(four.hi / four.lo)
     assert w4 == pytest.approx(w1 / 2, rel=1e-9)  # 1 / sqrt(k) on the score scale
-    assert one["quantile"] > 1.96  # Student's t with the pooled 3 degrees of freedom
+    assert one.quantile > 1.96  # Student's t with the pooled 3 degrees of freedom
+    assert four.verdict == MET and four.pessimistic(LOC) == four.hi and four.optimistic(LOC) == four.lo
     # with no pooled spread, a run varies as its own bootstrap says, at the normal quantile
     alone = seed_interval(LOC, recs[:1], Spread())
-    assert alone["quantile"] == pytest.approx(1.96, abs=1e-3) and alone["lo"] < 0.040 < alone["hi"]
-    assert seed_interval(LOC, [{"value": math.nan, "status": "ok"}], sp) is None
+    assert alone.quantile == pytest.approx(1.96, abs=1e-3) and alone.lo < 0.040 < alone.hi
+    assert seed_interval(LOC, [_run(0, math.nan)], sp) is None
+    assert seed_interval(LOC, [_run(0, 0.04, status="failed")], sp) is None
 
 
 def test_undecided_candidates_get_more_seeds_until_decided_within_the_budget():
     cfg = SearchConfig(grid_points=5, refine_steps=1, seeds=2, max_seeds=6, budget=9, models=("mlp",))
     search = DesignSearch(SPACE, [LOC, SIZE], cfg, REFS)
     calls = drive(search, Fake(noise=0.08))
+    ev = search.evidence
     base = cfg.seed_of(0)
     extra = [j for j in calls if j.evaluator == "trained" and j.seed - base >= cfg.seeds]
-    assert extra and len(extra) == search.extra_spent() <= cfg.budget
-    res = summarize(search)
+    assert extra and len(extra) == ev.extra_spent() <= cfg.budget
+    res = summarize(ev)
     for c in res["cheapest"]:
         assert c["verdict"] in (MET, NOT_MET, UNDECIDED)
         if c["verdict"] == UNDECIDED:  # the report says why it stayed so
@@ -118,22 +128,23 @@ def test_undecided_candidates_get_more_seeds_until_decided_within_the_budget():
             assert c["decision"].startswith("met after")
     # the decided candidates: more seeds went to the undecided ones only
     for j in extra:
-        tv = search.trained_value(LOC if j.task == "loc" else SIZE, j.design)
-        assert tv["seeds"] > cfg.seeds
-    assert res["budget"]["spent"] == search.extra_spent()
+        tv = ev.trained_value(LOC if j.task == "loc" else SIZE, j.design)
+        assert tv.seeds > cfg.seeds
+    assert res["budget"]["spent"] == ev.extra_spent()
 
 
 def test_the_best_learner_per_task_is_used_for_every_design():
     cfg = SearchConfig(grid_points=3, refine_steps=0, seeds=2, models=("mlp", "cnn1d"))
     search = DesignSearch(SPACE, [LOC, SIZE], cfg, REFS)
     calls = drive(search, Fake())
-    assert search.learner("loc") == "mlp" and search.learner("size") == "cnn1d"
-    after = [j for j in calls if j.evaluator == "trained" and j.design != search.base]
-    assert after and all(j.fidelity["model"] == search.learner(j.task) for j in after)
-    table = {(r["task"], r["model"]): r for r in summarize(search)["learners"]}
+    ev = search.evidence
+    assert ev.learner("loc") == "mlp" and ev.learner("size") == "cnn1d"
+    after = [j for j in calls if j.evaluator == "trained" and j.design != ev.base]
+    assert after and all(j.fidelity["model"] == ev.learner(j.task) for j in after)
+    table = {(r["task"], r["model"]): r for r in summarize(ev)["learners"]}
     assert table[("size", "cnn1d")]["chosen"] and not table[("size", "mlp")]["chosen"]
     assert table[("size", "cnn1d")]["value"] > table[("size", "mlp")]["value"]
-    assert all(c["learner"] == search.learner(c["task"]) for c in summarize(search)["cheapest"])
+    assert all(c["learner"] == ev.learner(c["task"]) for c in summarize(ev)["cheapest"])
 
 
 def test_worlds_find_the_parameter_that_breaks_the_cheapest_design():
@@ -144,7 +155,7 @@ def test_worlds_find_the_parameter_that_breaks_the_cheapest_design():
     cfg = SearchConfig(grid_points=5, refine_steps=2, seeds=2, candidates=3, models=("mlp",), budget=40)
     search = DesignSearch(SPACE, [LOC], cfg, REFS, worlds=plan)
     drive(search, Fake(worlds=worlds))
-    res = summarize(search)
+    res = summarize(search.evidence)
     rows = res["worlds"]["candidates"]
     assert rows and res["worlds"]["count"] == 6 and res["worlds"]["needed"] == 6
     first = rows[0]
@@ -178,18 +189,19 @@ def test_after_a_failed_candidate_the_worlds_climb_to_a_design_robust_to_the_los
         cfg = SearchConfig(grid_points=5, refine_steps=2, seeds=2, candidates=3, models=("mlp",), budget=40, seed=seed)
         search = DesignSearch(SPACE, [LOC], cfg, REFS, worlds=plan)
         drive(search, Fake(noise=0.02, worlds=worlds))
-        ex = robust.examined(search, LOC)
-        assert len(ex) >= 2 and not ex[0]["status"]["holds"] and ex[-1]["status"]["holds"]
+        ev = search.evidence
+        ex = robust.examined(ev, LOC)
+        assert len(ex) >= 2 and not ex[0].status.holds and ex[-1].status.holds
         loss = robust.worst_loss(LOC, ex[:1])
         assert loss > 0  # the darkest world costs the cheapest design precision
-        tv = ex[1]["trained"]
-        assert math.log(LOC.threshold) - math.log(tv["hi"]) > loss  # the second is robust to that loss
+        tv = ex[1].candidate.trained
+        assert math.log(LOC.threshold) - math.log(tv.hi) > loss  # the second is robust to that loss
         # and it is the cheapest such design of everything verified met
-        cheaper = [d for d in search.trained_designs(LOC) if search.cost(d, SPACE) < ex[1]["cost"]
-                   and d != ex[0]["design"] and search.trained_value(LOC, d)["verdict"] == MET]
-        assert all(math.log(LOC.threshold) - math.log(search.trained_value(LOC, d)["hi"]) <= loss for d in cheaper)
-        res = summarize(search)
-        assert res["cheapest"][0]["verdict"] == MET and res["cheapest"][0]["key"] == ex[-1]["design"].key()
+        cheaper = [d for d in ev.trained_designs(LOC) if ev.cost(d) < ex[1].candidate.cost
+                   and d != ex[0].design and ev.trained_value(LOC, d).verdict == MET]
+        assert all(math.log(LOC.threshold) - math.log(ev.trained_value(LOC, d).hi) <= loss for d in cheaper)
+        res = summarize(ev)
+        assert res["cheapest"][0]["verdict"] == MET and res["cheapest"][0]["key"] == ex[-1].design.key()
         answers.append(res["cheapest"][0]["verdict"])
     assert answers == [MET, MET]
 
@@ -201,9 +213,9 @@ def test_no_candidate_left_leaves_the_requirement_undecided_in_the_worlds():
     cfg = SearchConfig(grid_points=5, refine_steps=2, seeds=2, candidates=3, models=("mlp",), budget=40)
     search = DesignSearch(SPACE, [LOC], cfg, REFS, worlds=plan)
     drive(search, Fake(worlds=worlds))
-    ex = robust.examined(search, LOC)
-    assert len(ex) == 1 and not ex[0]["status"]["holds"]  # [worlds] candidates = 1: nothing more examined
-    assert summarize(search)["cheapest"][0]["verdict"] == UNDECIDED
+    ex = robust.examined(search.evidence, LOC)
+    assert len(ex) == 1 and not ex[0].status.holds  # [worlds] candidates = 1: nothing more examined
+    assert summarize(search.evidence)["cheapest"][0]["verdict"] == UNDECIDED
 
 
 def test_world_draws_are_reproducible_latin_hypercube_and_within_the_ranges():
@@ -259,16 +271,17 @@ def test_a_line_stops_training_below_a_costlier_design_that_is_not_met():
     search = DesignSearch(SPACE, [tight], cfg, REFS)
     calls = drive(search, Fake())
     trained = {j.design for j in calls if j.evaluator == "trained"}
-    line = search.line_points(tight, "photon_fraction", search.base)
-    assert [p["design"] in trained for p in line] == [False] * (len(line) - 1) + [True]  # only the costliest
-    assert all(p["implied"] for p in line[:-1] if not p["screened"]) and not line[-1]["implied"]
-    row = next(r for r in summarize(search)["requirements"] if r["parameter"] == "photon_fraction")
+    ev = search.evidence
+    line = line_points(ev, tight, "photon_fraction", ev.base)
+    assert [p.design in trained for p in line] == [False] * (len(line) - 1) + [True]  # only the costliest
+    assert all(p.implied for p in line[:-1] if not p.screened) and not line[-1].implied
+    row = next(r for r in summarize(ev)["requirements"] if r["parameter"] == "photon_fraction")
     assert row["verdict"] == NOT_MET and row["implied_not_met"] + row["screened_out"] == len(line) - 1
     # a met line is trained on: the looser requirement trains every photon point the bound lets through
     search2 = DesignSearch(SPACE, [LOC], cfg, REFS)
     calls2 = drive(search2, Fake())
-    line2 = search2.line_points(LOC, "photon_fraction", search2.base)
-    assert sum(p["trained"] is not None for p in line2) >= 3
+    line2 = line_points(search2.evidence, LOC, "photon_fraction", search2.evidence.base)
+    assert sum(p.trained is not None for p in line2) >= 3
 
 
 def test_worlds_blame_a_parameter_only_for_worlds_that_fail_not_for_undecided_ones():
@@ -276,11 +289,15 @@ def test_worlds_blame_a_parameter_only_for_worlds_that_fail_not_for_undecided_on
 
     worlds = [World(i + 1, {"photon_scale": s}, {"albedo": a}) for i, (s, a) in
               enumerate([(0.5, 0.3), (1.0, 0.4), (2.0, 0.5), (4.0, 0.6)])]
-    per = [{"value": v, "verdict": k} for v, k in
-           [(0.93, UNDECIDED), (0.95, MET), (0.97, MET), (0.92, UNDECIDED)]]
-    att = robust._attribution(SIZE, worlds, per)
-    assert att["breaks"].startswith("undecided in worlds 1, 4") and "breaks it" not in att["breaks"]
-    per[0] = {"value": 0.80, "verdict": NOT_MET}
-    att = robust._attribution(SIZE, worlds, per)
-    assert "breaks it (not met in worlds 1;" in att["breaks"] and att["breaks"].endswith(
+
+    def value(v, k):
+        return robust.WorldValue(v, v - 0.01, v + 0.01, k, 1, 1, 0.0)
+
+    per = [value(v, k) for v, k in [(0.93, UNDECIDED), (0.95, MET), (0.97, MET), (0.92, UNDECIDED)]]
+    _, breaks, _ = robust.attribution(SIZE, worlds, per)
+    assert breaks.startswith("undecided in worlds 1, 4") and "breaks it" not in breaks
+    per[0] = value(0.80, NOT_MET)
+    _, breaks, driver = robust.attribution(SIZE, worlds, per)
+    assert driver in ("albedo", "photon_scale")
+    assert "breaks it (not met in worlds 1;" in breaks and breaks.endswith(
         "; undecided in worlds 4 (the interval straddles the threshold when the seeds or the budget ran out)")

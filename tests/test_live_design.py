@@ -50,8 +50,8 @@ def test_progress_follows_the_search_through_its_stages(out):
     watch.refresh(force=True)
     assert is_design_folder(out)
     assert watch.progress["stage"] == "references" and watch.progress["done"] == 0   # references not simulated yet
-    search, _ = search_from_files(out)
-    for path in search.references.values():
+    search, _, references = search_from_files(out)
+    for path in references.values():
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(b"")   # the names only: the search never reads them
     watch.refresh(force=True)
@@ -60,7 +60,7 @@ def test_progress_follows_the_search_through_its_stages(out):
     stages, k = [], 0
     with open(out / EVALUATIONS, "a") as fh:
         while True:
-            search, _ = search_from_files(out, watch.results)
+            search = search_from_files(out, watch.results).search
             jobs = search.suggest()
             if not jobs:
                 break
@@ -90,8 +90,8 @@ def test_progress_follows_the_search_through_its_stages(out):
 
 
 def test_the_log_is_read_incrementally_and_a_torn_line_waits(out):
-    search, _ = search_from_files(out)
-    for path in search.references.values():
+    search, _, references = search_from_files(out)
+    for path in references.values():
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(b"")
     jobs = search.suggest()
@@ -114,8 +114,8 @@ def test_the_log_is_read_incrementally_and_a_torn_line_waits(out):
 
 
 def test_time_left_uses_the_evaluations_seen_landing(out, monkeypatch):
-    search, _ = search_from_files(out)
-    for path in search.references.values():
+    search, _, references = search_from_files(out)
+    for path in references.values():
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(b"")
     jobs = search.suggest()

@@ -1,7 +1,9 @@
 """Evaluate one design on one task: fast bounds (screen) and trained models (verification).
 
-An evaluation is a plain dict in and a plain dict out (:func:`evaluate`), so
-it runs the same in this process, a local process pool or on Dask workers.
+An evaluation is a typed job in and a plain dict out (:func:`evaluate`), so
+it runs the same in this process, a local process pool or on Dask workers;
+the dict is the line the run logs, typed by the search when it ingests it
+(:class:`~nlosplan.planner.design.evaluation.Evaluation`).
 Every result records the design, task, evaluator, fidelity, seed, metric
 value with its interval, run time and status (``ok``, ``unreachable`` with
 the reason, or ``failed`` with the error).
@@ -43,8 +45,9 @@ import time
 import numpy as np
 
 from nlosplan.planner.design.data import load_reference
+from nlosplan.planner.design.evaluation import Evaluator, Status
 from nlosplan.planner.design.jobs import DesignJob
-from nlosplan.planner.design.requirements import METRIC_OF_TASK, Condition
+from nlosplan.planner.design.requirements import METRIC_OF_TASK, Condition, Task
 from nlosplan.planner.design.worlds import world_sensor
 
 __all__ = ["evaluate", "trained_metric", "DEFAULT_FIDELITY"]
@@ -95,7 +98,7 @@ def _observer(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[flo
     hyps = [(o, s) for o in objects for s in sizes
             if any(keep[idx[(o, s, p)]] for p in positions if (o, s, p) in idx)]
     cube = np.stack([np.stack([means[idx[(o, s, p)]].reshape(-1) for p in positions]) for o, s in hyps])
-    if task == "shape":
+    if task == Task.SHAPE:
         classes = sorted({o for o, _ in hyps})
         class_of = [classes.index(o) for o, _ in hyps]
     else:
@@ -166,7 +169,7 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
                         width=float(fid["width"]), classes=classes)
     keep = _rows(data.test.labels, condition)
     scores, truth = model.predict(data.test.histograms)[keep], data.y_test[keep]
-    score = loc_rmse if task == "loc" else top1_accuracy
+    score = loc_rmse if task == Task.LOC else top1_accuracy
     stat = lambda i: score(scores[i], truth[i])  # noqa: E731
     n = int(keep.sum())
     if n == 0:
@@ -175,7 +178,7 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
     lo, hi = _bootstrap(stat, n, int(fid["bootstrap"]), seed)
     extra = {"model": fid["model"], "epochs": len(model.history), "n_train": int(model.n_train), "n_test": n,
              "train_seconds": float(model.train_seconds)}
-    if task == "loc":
+    if task == Task.LOC:
         extra["loc_rms_distance"] = loc_rms_distance(scores, truth)
     return value, (lo, hi), extra
 
@@ -205,22 +208,22 @@ def evaluate(job: DesignJob) -> dict:
 
     t0 = time.perf_counter()
     out = {**job.to_dict(), "metric": METRIC_OF_TASK[job.task][0], "value": math.nan, "lo": math.nan,
-           "hi": math.nan, "status": "ok", "reason": "", "extra": {}}
+           "hi": math.nan, "status": Status.OK, "reason": "", "extra": {}}
     try:
         ref = load_reference(job.reference)
         deg, why = ref.degradation(world_sensor(job.design, SensorConfig.from_dict(job.reference_sensor), job.world))
         if deg is None:
-            out.update(status="unreachable", reason=why)
-        elif job.evaluator == "bound" and job.task == "loc":
+            out.update(status=Status.UNREACHABLE, reason=why)
+        elif job.evaluator is Evaluator.BOUND and job.task is Task.LOC:
             value, note = _crlb(ref, deg, int(job.fidelity.get("crlb_repeats", 1)), job.condition)
             out.update(value=value, lo=value, hi=value, reason=note)
-        elif job.evaluator == "bound":
-            value, (lo, hi), extra = _observer(ref, deg, job.task, job.fidelity, int(job.seed), job.condition)
+        elif job.evaluator is Evaluator.BOUND:
+            value, (lo, hi), extra = _observer(ref, deg, job.task.value, job.fidelity, int(job.seed), job.condition)
             out.update(value=value, lo=lo, hi=hi, extra=extra)
         else:
-            value, (lo, hi), extra = _trained(ref, deg, job.task, job.fidelity, int(job.seed), job.condition)
+            value, (lo, hi), extra = _trained(ref, deg, job.task.value, job.fidelity, int(job.seed), job.condition)
             out.update(value=value, lo=lo, hi=hi, extra=extra)
     except Exception as exc:  # recorded, never fatal to the search
-        out.update(status="failed", reason=f"{type(exc).__name__}: {exc}")
+        out.update(status=Status.FAILED, reason=f"{type(exc).__name__}: {exc}")
     out["seconds"] = time.perf_counter() - t0
     return out

@@ -4,10 +4,11 @@ A job is what the search suggests and an executor (this process, a local
 process pool, Dask workers) hands to a module-level function
 (:func:`~nlosplan.planner.design.evaluators.evaluate`,
 :func:`~nlosplan.planner.design.optimize.optimize_choice`). Jobs are frozen
-dataclasses of plain values, a :class:`~nlosplan.planner.design.space.Design`
+dataclasses of plain values, enums, a :class:`~nlosplan.planner.design.space.Design`
 and a :class:`~nlosplan.planner.design.requirements.Condition`, so they
-pickle to any worker; results stay plain dicts (they are logged as JSON
-lines and read back on resume).
+pickle to any worker; a result travels back as a plain dict (it is logged as
+a JSON line and read back on resume) and is typed once, when the search
+ingests it (:class:`~nlosplan.planner.design.evaluation.Evaluation`).
 """
 
 from __future__ import annotations
@@ -19,15 +20,12 @@ from pathlib import Path
 
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
-from nlosplan.planner.design.requirements import Condition, Requirement
+from nlosplan.planner.design.evaluation import Evaluator
+from nlosplan.planner.design.requirements import Condition, Requirement, Task
 from nlosplan.planner.design.space import Design, DesignSpace
 from nlosplan.sensor_models import SensorConfig
 
-__all__ = ["DesignJob", "OptimizeJob", "ReferenceJob", "CatalogJob", "EVALUATORS"]
-
-#: ``bound`` (CRLB / ideal observer), ``trained`` (models on the trained reference: real captures when given),
-#: ``trained_sim`` (models on the simulated reference, beside real ones).
-EVALUATORS = ("bound", "trained", "trained_sim")
+__all__ = ["DesignJob", "OptimizeJob", "ReferenceJob", "CatalogJob"]
 
 
 @dataclass(frozen=True)
@@ -36,8 +34,10 @@ class DesignJob:
 
     Parameters
     ----------
-    evaluator : {"bound", "trained", "trained_sim"}
-    task : {"loc", "shape", "size"}
+    evaluator : Evaluator or its name
+        Kept as an :class:`~nlosplan.planner.design.evaluation.Evaluator`.
+    task : Task or its name
+        Kept as a :class:`~nlosplan.planner.design.requirements.Task`.
     design : Design
     seed : int
     fidelity : dict
@@ -53,8 +53,8 @@ class DesignJob:
         file is that world's); None in the nominal model.
     """
 
-    evaluator: str
-    task: str
+    evaluator: Evaluator
+    task: Task
     design: Design
     seed: int
     fidelity: dict
@@ -62,6 +62,10 @@ class DesignJob:
     reference: str
     reference_sensor: dict
     world: dict | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "evaluator", Evaluator(self.evaluator))
+        object.__setattr__(self, "task", Task(self.task))
 
     @property
     def key(self) -> str:
@@ -123,7 +127,7 @@ class OptimizeJob:
 
     def bound_job(self, design: Design) -> DesignJob:
         """The bound evaluation of ``design`` under this run's requirement (seed 0)."""
-        return DesignJob("bound", self.requirement.task, design, 0, self.fidelity, self.requirement.condition,
+        return DesignJob(Evaluator.BOUND, self.requirement.task, design, 0, self.fidelity, self.requirement.condition,
                          self.reference, self.reference_sensor)
 
 

@@ -5,7 +5,7 @@ For one requirement and one discrete choice (zones, bin width), COBYLA
 variables in [0, 1] — jitter (0: the space's smallest), log photon budget and
 number of bins — to minimize the design's cost subject to the requirement
 being met by the bound corrected with the measured bound-to-trained gap
-(:meth:`~nlosplan.planner.design.search.DesignSearch.predict`). The costliest
+(:meth:`~nlosplan.planner.design.evidence.Evidence.predict`). The costliest
 corner is tried first: if even it misses, the choice is infeasible and
 nothing else is evaluated. Jobs are :class:`~nlosplan.planner.design.jobs.OptimizeJob`
 (typed, picklable), so the choices run in parallel on any executor.
@@ -18,26 +18,37 @@ import time
 
 import numpy as np
 
+from nlosplan.planner.design.evaluation import Status
 from nlosplan.planner.design.evaluators import evaluate
+from nlosplan.planner.design.evidence import Candidate
 from nlosplan.planner.design.jobs import OptimizeJob
-from nlosplan.planner.design.verdicts import metric_to_score, score_to_metric
 from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.verdicts import metric_to_score, score_to_metric
 
 __all__ = ["optimize_jobs", "optimize_choice", "collect_candidates"]
 
 
-def optimize_jobs(search) -> list[OptimizeJob]:
-    """One job per (requirement, zones, bin width) for :func:`optimize_choice`."""
+def optimize_jobs(evidence, bound_job) -> list[OptimizeJob]:
+    """One job per (requirement, zones, bin width) for :func:`optimize_choice`.
+
+    Parameters
+    ----------
+    evidence : Evidence
+        The search's evidence (the gap, the space, the cost).
+    bound_job : callable
+        ``bound_job(req, design)``: the search's bound job of a design (its knobs, reference, reference sensor).
+    """
     jobs = []
-    for req in search.requirements:
-        gap = search.gap(req)["value"]
-        for z in search.space.zones:
-            for f in search.space.bin_factors:
-                base = search.base.replace(zones=z, bin_factor=f, n_bins=search.space.max_bins(f))
-                proto = search.job("bound", req, base)
-                jobs.append(OptimizeJob(req, gap, search.space, search.cost, base, search.config.optimize_evals,
-                                        {**{k: v for k, v in proto.fidelity.items() if k != "stop_at"},
-                                         "draws": max(100, proto.fidelity["draws"] // 2)},
+    for req in evidence.requirements:
+        gap = evidence.gap(req).value
+        for z in evidence.space.zones:
+            for f in evidence.space.bin_factors:
+                base = evidence.base.replace(zones=z, bin_factor=f, n_bins=evidence.space.max_bins(f))
+                proto = bound_job(req, base)
+                knobs = {k: v for k, v in proto.fidelity.items() if k != "stop_at"}
+                jobs.append(OptimizeJob(req, gap, evidence.space, evidence.cost_model, base,
+                                        evidence.config.optimize_evals,
+                                        {**knobs, "draws": max(100, knobs["draws"] // 2)},
                                         proto.reference, proto.reference_sensor))
     return jobs
 
@@ -73,15 +84,16 @@ def optimize_choice(job: OptimizeJob) -> dict:
         d = _design(u, base, space)
         if d not in memo:
             r = evaluate(job.bound_job(d))
-            if r["status"] != "ok" or not math.isfinite(r["value"]):
+            value = r["value"]
+            if r["status"] != Status.OK or not math.isfinite(value):
                 memo[d] = (-1.0, math.nan)
             else:
-                pred = score_to_metric(req, metric_to_score(req, r["value"]) + job.gap)
-                memo[d] = (req.margin(pred), r["value"])
+                pred = score_to_metric(req, metric_to_score(req, value) + job.gap)
+                memo[d] = (req.margin(pred), value)
         return memo[d]
 
     out = {"requirement": req.name, "design": None, "cost": math.nan, "predicted": math.nan, "bound": math.nan,
-           "status": "infeasible", "reason": "", "choice": f"{base.zones[0]}x{base.zones[1]}, bin x{base.bin_factor}"}
+           "status": "infeasible", "reason": "", "choice": f"{base.layout}, bin x{base.bin_factor}"}
     top = np.array([1.0, 1.0, 1.0])  # costliest corner: least jitter, most photons, most bins
     m_top, _ = margin(top)
     if not m_top >= 0:
@@ -106,7 +118,7 @@ def optimize_choice(job: OptimizeJob) -> dict:
     try:
         opt.optimize(top.copy())
     except (nlopt.RoundoffLimited, ValueError, RuntimeError) as exc:  # keep the best feasible point found
-        out["reason"] = f"COBYLA stopped early ({type(exc).__name__})"
+        out.update(reason=f"COBYLA stopped early ({type(exc).__name__})")
     d = _design(best["u"], base, space)
     m, b = margin(best["u"])
     pred = score_to_metric(req, metric_to_score(req, b) + job.gap)
@@ -115,22 +127,25 @@ def optimize_choice(job: OptimizeJob) -> dict:
     return out
 
 
-def collect_candidates(search, results: list[dict], per_task: int) -> dict[str, list[dict]]:
+def collect_candidates(evidence, results: list[dict], per_task: int) -> dict[str, list[Candidate]]:
     """Per requirement: the ``per_task`` cheapest feasible, distinct optimized designs, then the ``per_task``
     cheapest scanned designs whose learner meets it on average and is not already failed
-    (:meth:`~nlosplan.planner.design.search.DesignSearch.scan_candidates`); each with ``source``."""
+    (:meth:`~nlosplan.planner.design.evidence.Evidence.scan_candidates`); each with its ``source``.
+
+    ``results`` are :func:`optimize_choice`'s rows (an executor's failed row carries no design: left out).
+    """
     out = {}
-    for req in search.requirements:
-        rows = sorted((r for r in results if r["requirement"] == req.name and r["status"] == "feasible"),
+    for req in evidence.requirements:
+        rows = sorted((r for r in results if r.get("requirement") == req.name and r.get("status") == "feasible"),
                       key=lambda r: r["cost"])
         seen, picked = set(), []
         for r in rows:
-            d = Design.from_dict(r["design"])
-            if d not in seen:
-                seen.add(d)
-                picked.append({**r, "design": d, "source": "optimized"})
+            c = Candidate.from_dict({**r, "source": "optimized"})
+            if c.design not in seen:
+                seen.add(c.design)
+                picked.append(c)
             if len(picked) >= per_task:
                 break
-        picked += [c for c in search.scan_candidates(req, per_task) if c["design"] not in seen]
+        picked += [c for c in evidence.scan_candidates(req, per_task) if c.design not in seen]
         out[req.name] = picked
     return out

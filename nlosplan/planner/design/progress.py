@@ -5,51 +5,48 @@ from ``design_checkpoint.json`` (the configuration, the optimize stage's
 candidates) and ingests ``design_evaluations.jsonl``, exactly as a resumed run
 does (:func:`~nlosplan.planner.design.run.run_design`), then asks it what it
 would suggest next: the stage, the evaluations left in that stage, and the
-answer so far (:func:`~nlosplan.planner.design.summary.summarize` of what has
-landed). It computes nothing new and writes nothing: the run's files are the
+answer so far (:func:`~nlosplan.planner.design.summary.summarize` of its
+evidence). It computes nothing new and writes nothing: the run's files are the
 only source. The live view (``nlosplan serve``, ``design --live``) shows it.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 from nlosplan.errors import UserError
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
+from nlosplan.planner.design.evaluation import Status
+from nlosplan.planner.design.evidence import Candidate
+from nlosplan.planner.design.references import real_reference_path, reference_paths
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.run import CHECKPOINT, EVALUATIONS, check_log
-from nlosplan.planner.design.search import DesignSearch, SearchConfig
-from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.search import DesignSearch, SearchConfig, Stage
+from nlosplan.planner.design.space import DesignSpace
 from nlosplan.planner.design.summary import summarize
 
-__all__ = ["STAGES", "design_progress", "search_from_files"]
+__all__ = ["STAGES", "RunFiles", "design_progress", "search_from_files"]
 
 #: The stages in run order: ``references`` (simulating, before any evaluation), the search's own
-#: (:attr:`DesignSearch.STAGES`, ``screen`` ... ``worlds``; ``optimize`` runs COBYLA and evaluates nothing),
-#: ``finishing`` (nothing left to evaluate: the stability catalog and the report), ``done`` (``result.json``
-#: written).
-STAGES = ("references",) + tuple(s for s in DesignSearch.STAGES if s != "done") + ("finishing", "done")
+#: (:class:`~nlosplan.planner.design.search.Stage`, ``screen`` ... ``worlds``; ``optimize`` runs COBYLA and
+#: evaluates nothing), ``finishing`` (nothing left to evaluate: the stability catalog and the report), ``done``
+#: (``result.json`` written).
+STAGES = ("references",) + tuple(s.value for s in Stage if s is not Stage.DONE) + ("finishing", "done")
 
 
-def _reference_paths(out: Path, space: DesignSpace, scenes: SceneSet, cfg: dict) -> tuple[dict, dict]:
-    """The reference files a run of this configuration uses (the names its evaluation keys carry)."""
-    sims = {}
-    for z in space.zones:
-        ref_design = Design(z, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
-        sensor = ref_design.sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
-        sims[f"{z[0]}x{z[1]}"] = out / "reference" / f"{z[0]}x{z[1]}_{scenes.key(sensor)}.npz"
-    real = {}
-    if cfg.get("real"):
-        path = out / "reference" / f"real_{hashlib.sha1(str(cfg['real']).encode()).hexdigest()[:8]}.npz"
-        real = {k: path for k in sims}
-    return sims, real
+class RunFiles(NamedTuple):
+    """A run rebuilt from its files: the search, the checkpoint as read, and the simulated references it names."""
+
+    search: DesignSearch
+    checkpoint: dict
+    references: dict[str, Path]
 
 
-def search_from_files(out, results: list[dict] | None = None) -> tuple[DesignSearch, dict]:
+def search_from_files(out, results: list[dict] | None = None) -> RunFiles:
     """The run's search rebuilt from ``OUT``'s checkpoint, with its logged results ingested.
 
     Parameters
@@ -61,8 +58,9 @@ def search_from_files(out, results: list[dict] | None = None) -> tuple[DesignSea
 
     Returns
     -------
-    (DesignSearch, dict)
-        The search (its stage advanced as far as the results allow) and the checkpoint.
+    RunFiles
+        The search (its stage advanced as far as the results allow), the checkpoint and the reference files
+        (layout -> path; the run may not have simulated them yet).
 
     Raises
     ------
@@ -78,18 +76,20 @@ def search_from_files(out, results: list[dict] | None = None) -> tuple[DesignSea
         search_cfg = SearchConfig(**cfg["search"])
         scenes = SceneSet.from_dict(cfg["scenes"])
         cost = CostModel.from_dict(cfg["cost"])
+        real = cfg.get("real")
     except (OSError, json.JSONDecodeError) as exc:
         raise UserError(f"cannot read the design checkpoint {out / CHECKPOINT}: {exc}") from None
     except (KeyError, TypeError, ValueError) as exc:
         raise UserError(f"{out / CHECKPOINT} holds a configuration this nlosplan cannot read ({exc!r})") from None
-    sims, real = _reference_paths(out, space, scenes, cfg)
-    search = DesignSearch(space, reqs, search_cfg, sims, cost, real or None)
+    sims = reference_paths(out, space, scenes)
+    real_refs = {k: real_reference_path(out, real) for k in sims} if real else None
+    search = DesignSearch(space, reqs, search_cfg, sims, cost, real_refs)
     search.ingest(_logged(out) if results is None else results)
-    if ckpt.get("candidates") is not None:
-        cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v] for k, v in ckpt["candidates"].items()}
-        search.stage = "optimize"
-        search.set_candidates(cands, ckpt.get("optimize_log") or [])
-    return search, ckpt
+    candidates = ckpt.get("candidates")
+    if candidates is not None:
+        search.ingest_candidates({k: [Candidate.from_dict(c) for c in v] for k, v in candidates.items()},
+                                 ckpt.get("optimize_log") or [])
+    return RunFiles(search, ckpt, sims)
 
 
 def _logged(out: Path) -> list[dict]:
@@ -120,31 +120,29 @@ def design_progress(out, results: list[dict] | None = None) -> dict:
     """
     out = Path(out)
     results = _logged(out) if results is None else results
-    search, ckpt = search_from_files(out, results)
+    search, ckpt, references = search_from_files(out, results)
     jobs = search.suggest()
     if jobs:
-        stage = search.stage
-    elif search.stage == "optimize" and ckpt.get("candidates") is None:
+        stage = search.stage.value
+    elif search.stage is Stage.OPTIMIZE and ckpt.get("candidates") is None:
         stage = "optimize"
     else:
         stage = "finishing"
-    if not results and stage == "screen":
-        refs = list(search.references.values())
-        if not all(Path(p).exists() for p in refs):
-            stage = "references"
+    if not results and stage == "screen" and not all(p.exists() for p in references.values()):
+        stage = "references"
     result = out / "result.json"   # written by the command after the run, so newer than the run's checkpoint
     finished = result.exists() and result.stat().st_mtime_ns >= (out / CHECKPOINT).stat().st_mtime_ns
     if finished:
         stage = "done"
-    left_by = {}
+    left_by: dict[str, int] = {}
     for j in jobs:
-        left_by[j.evaluator] = left_by.get(j.evaluator, 0) + 1
-    costs = {}
-    for r in results:
-        d = Design.from_dict(r["design"])
-        if d.key() not in costs:
-            c = search.cost(d, search.space)
-            costs[d.key()] = c if math.isfinite(c) else None
+        left_by[j.evaluator.value] = left_by.get(j.evaluator.value, 0) + 1
+    evidence, costs = search.evidence, {}
+    for r in evidence.records():
+        key = r.design.key()
+        if key not in costs:
+            c = evidence.cost(r.design)
+            costs[key] = c if math.isfinite(c) else None
     return {"stage": stage, "done": len(results), "left": len(jobs), "left_by_evaluator": left_by,
-            "failed": sum(r.get("status") == "failed" for r in results), "costs": costs,
-            "summary": summarize(search), "finished": finished}
+            "failed": sum(r.get("status") == Status.FAILED for r in results), "costs": costs,
+            "summary": summarize(evidence), "finished": finished}

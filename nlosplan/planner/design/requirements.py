@@ -15,19 +15,32 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import NamedTuple
 
 import numpy as np
 
 from nlosplan.errors import UserError
 
-__all__ = ["Condition", "Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "parse_requirement"]
+__all__ = ["Condition", "Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "Task", "parse_requirement"]
+
+
+class Task(StrEnum):
+    """The tasks a design is judged on (the tasks room's :data:`~nlosplan.tasks.names.TASKS`, as an enum).
+
+    A member is its name (``Task.LOC == "loc"``): it reads, prints and logs as the plain string.
+    """
+
+    LOC = "loc"
+    SHAPE = "shape"
+    SIZE = "size"
+
 
 #: The metric each task is judged by, whether smaller is better, and its unit.
-METRIC_OF_TASK: dict[str, tuple[str, bool, str]] = {
-    "loc": ("loc_rmse", True, "m"),
-    "shape": ("top1_acc", False, ""),
-    "size": ("top1_acc", False, ""),
+METRIC_OF_TASK: dict[Task, tuple[str, bool, str]] = {
+    Task.LOC: ("loc_rmse", True, "m"),
+    Task.SHAPE: ("top1_acc", False, ""),
+    Task.SIZE: ("top1_acc", False, ""),
 }
 _CONDITIONS = {"size": ("4in", "8in"), "lights": ("on", "off"), "quadrant": ("near", "far")}
 
@@ -64,20 +77,22 @@ class Requirement:
 
     Parameters
     ----------
-    task : {"loc", "shape", "size"}
+    task : Task or {"loc", "shape", "size"}
+        Kept as a :class:`Task`.
     threshold : float
         Metres for the localization RMSE (``loc_rmse``), a fraction for accuracies.
     condition : Condition or (str, str), optional
         ``(column, value)`` among size / lights / quadrant (kept as a :class:`Condition`).
     """
 
-    task: str
+    task: Task
     threshold: float
     condition: Condition | None = None
 
     def __post_init__(self) -> None:
         if self.task not in METRIC_OF_TASK:
             raise UserError(f"unknown task {self.task!r}; allowed: {', '.join(METRIC_OF_TASK)}")
+        object.__setattr__(self, "task", Task(self.task))
         t = float(self.threshold)
         if not (t > 0) or (not self.smaller_is_better and t > 1):
             raise UserError(f"{self.task} threshold {self.threshold} must be "

@@ -23,14 +23,20 @@ values rank most closely with the candidate's margin across the worlds).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 from nlosplan.planner.design.data import SceneSet
-from nlosplan.planner.design.verdicts import (_Z, MET, NOT_MET, UNDECIDED, _within_sd, metric_to_score,
-                                              rank_correlation, score_to_metric, verdict)
+from nlosplan.planner.design.evaluation import Evaluator, place_of
+from nlosplan.planner.design.evidence import Candidate, Evidence
+from nlosplan.planner.design.requirements import Requirement
+from nlosplan.planner.design.space import Design
+from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, Z95, Verdict, metric_to_score,
+                                              rank_correlation, score_to_metric, verdict, within_sd)
 from nlosplan.planner.design.worlds import World, WorldsConfig
 
-__all__ = ["WorldPlan", "world_jobs", "needed_references", "world_value", "world_status", "examined", "worlds_table"]
+__all__ = ["WorldPlan", "WorldRun", "WorldValue", "WorldStatus", "Examined", "world_target", "world_runs",
+           "needed_references", "world_value", "world_status", "attribution", "worst_loss", "next_candidate",
+           "examined", "worlds_table"]
 
 
 @dataclass
@@ -64,214 +70,275 @@ class WorldPlan:
         return self.worlds[1:]
 
 
-def _job(search, req, d, w: World, i: int):
-    """The job of ``d``'s ``i``-th run in world ``w`` (None until its reference exists)."""
-    wp = search.worlds
-    layout = search._layout(d)
-    ref = wp.references.get((w.index, layout))
+@dataclass(frozen=True)
+class WorldRun:
+    """One evaluation the worlds stage asks for: ``design``'s ``index``-th run for ``requirement`` in ``world``."""
+
+    requirement: Requirement
+    design: Design
+    world: World
+    index: int
+
+
+@dataclass(frozen=True)
+class WorldValue:
+    """A design's metric in one world: the verified value shifted by the paired world effect.
+
+    ``seeds`` pairs finished (of ``runs`` evaluated); ``effect`` is the mean paired difference, score scale.
+    """
+
+    value: float
+    lo: float
+    hi: float
+    verdict: Verdict
+    seeds: int
+    runs: int
+    effect: float
+
+
+@dataclass(frozen=True)
+class WorldStatus:
+    """In how many of the drawn worlds a design is met, whether that holds, and what breaks it."""
+
+    met: int
+    not_met: int
+    undecided: int
+    worlds: int
+    needed: int
+    holds: bool
+    per_world: tuple[WorldValue, ...]
+    sensitivity: dict
+    breaks: str
+    driver: str | None = None
+
+
+@dataclass(frozen=True)
+class Examined:
+    """A candidate examined in the worlds and its status (None while its evaluations are not all in)."""
+
+    candidate: Candidate
+    status: WorldStatus | None
+
+    @property
+    def design(self) -> Design:
+        return self.candidate.design
+
+
+def world_target(evidence: Evidence, w: World, layout: str) -> tuple[str | None, dict | None] | None:
+    """Where world ``w``'s runs of a layout go: None until its reference exists; ``(None, None)`` for the nominal
+    runs themselves (world 0 on the run's own reference); else the reference and the world's sensor overrides."""
+    ref = evidence.worlds.references.get((w.index, layout))
     if ref is None:
         return None
-    if w.index == 0 and str(ref) == str(search.trained_references.get(layout)):
-        return search.job("trained", req, d, i)  # world 0 is the run's own reference: its own runs
-    return search.job("trained", req, d, i, reference=str(ref), world=dict(w.sensor))
+    if w.index == 0 and str(ref) == str(evidence.trained_references.get(layout)):
+        return None, None
+    return str(ref), dict(w.sensor)
 
 
-def world_value(search, req, d, w: World) -> dict | None:
+def _run(evidence: Evidence, req: Requirement, d: Design, w: World, i: int):
+    where = world_target(evidence, w, d.layout)
+    return None if where is None else evidence.run(Evaluator.TRAINED, req, d, i, place=place_of(*where))
+
+
+def world_value(evidence: Evidence, req: Requirement, d: Design, w: World) -> WorldValue | None:
     """``d``'s metric in world ``w``: verified value + paired world effect, with interval and verdict."""
-    nominal = search.trained_value(req, d)
+    nominal = evidence.trained_value(req, d)
     if nominal is None:
         return None
-    control = search.worlds.worlds[0]
+    control = evidence.worlds.worlds[0]
     pairs, present = [], 0
-    for i in range(search.config.max_seeds):
-        jw, j0 = _job(search, req, d, w, i), _job(search, req, d, control, i)
-        rw = None if jw is None else search.results.get(jw.key)
-        r0 = None if j0 is None else search.results.get(j0.key)
+    for i in range(evidence.config.max_seeds):
+        rw, r0 = _run(evidence, req, d, w, i), _run(evidence, req, d, control, i)
         if rw is None or r0 is None:
             break
         present += 1
-        if all(r["status"] == "ok" and math.isfinite(r["value"]) for r in (rw, r0)):
+        if rw.finite and r0.finite:
             pairs.append((rw, r0))
     if not present:
         return None
     if not pairs:  # every run failed: recorded, undecided
-        return {"value": math.nan, "lo": math.nan, "hi": math.nan, "verdict": UNDECIDED, "seeds": 0,
-                "runs": present, "effect": math.nan}
-    diffs = [metric_to_score(req, a["value"]) - metric_to_score(req, b["value"]) for a, b in pairs]
+        return WorldValue(math.nan, math.nan, math.nan, UNDECIDED, 0, present, math.nan)
+    diffs = [metric_to_score(req, a.value) - metric_to_score(req, b.value) for a, b in pairs]
     m = len(diffs)
-    spread = search.spread(req)
-    within = [s ** 2 for a, b in pairs for s in (_within_sd(req, a), _within_sd(req, b)) if math.isfinite(s)]
+    spread = evidence.spread(req)
+    within = [s ** 2 for a, b in pairs for s in (within_sd(req, a), within_sd(req, b)) if math.isfinite(s)]
     var_within = sum(within) / len(within) if within else 0.0
-    pooled = spread.var * search.worlds.scene_ratio if math.isfinite(spread.var) else math.nan
+    pooled = spread.var * evidence.worlds.scene_ratio if math.isfinite(spread.var) else math.nan
     if math.isfinite(pooled) and pooled >= var_within:
         from scipy.stats import t as student
 
         var_run, q = pooled, float(student.ppf(0.975, max(spread.dof, 1)))
     else:
-        var_run, q = var_within, _Z
-    centre = metric_to_score(req, nominal["value"]) + sum(diffs) / m
-    half = q * math.sqrt(nominal["sd_run"] ** 2 / nominal["seeds"] + 2.0 * var_run / m)
+        var_run, q = var_within, Z95
+    centre = metric_to_score(req, nominal.value) + sum(diffs) / m
+    half = q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / m)
     lo, hi = score_to_metric(req, centre - half), score_to_metric(req, centre + half)
-    return {"value": score_to_metric(req, centre), "lo": lo, "hi": hi, "verdict": verdict(req, lo, hi),
-            "seeds": m, "runs": present, "effect": sum(diffs) / m}
+    return WorldValue(score_to_metric(req, centre), lo, hi, verdict(req, lo, hi), m, present, sum(diffs) / m)
 
 
-def _can_extend(search, wv: dict | None) -> bool:
-    return (wv is not None and wv["verdict"] == UNDECIDED and wv["runs"] < search.config.max_seeds
-            and search.budget_left() >= 2)
+def _can_extend(evidence: Evidence, wv: WorldValue | None) -> bool:
+    return (wv is not None and wv.verdict == UNDECIDED and wv.runs < evidence.config.max_seeds
+            and evidence.budget_left() >= 2)
 
 
-def world_status(search, req, d) -> dict | None:
+def world_status(evidence: Evidence, req: Requirement, d: Design) -> WorldStatus | None:
     """In how many worlds ``d`` is met, and whether it holds (None while its evaluations are not all in)."""
-    wp = search.worlds
-    per = [world_value(search, req, d, w) for w in wp.drawn]
-    if any(v is None or _can_extend(search, v) for v in per):
+    wp = evidence.worlds
+    per = [world_value(evidence, req, d, w) for w in wp.drawn]
+    if any(v is None or _can_extend(evidence, v) for v in per):
         return None
-    met = sum(v["verdict"] == MET for v in per)
-    return {"met": met, "not_met": sum(v["verdict"] == NOT_MET for v in per),
-            "undecided": sum(v["verdict"] == UNDECIDED for v in per), "worlds": len(per),
-            "needed": wp.config.needed(), "holds": met >= wp.config.needed(), "per_world": per,
-            **_attribution(req, wp.drawn, per)}
+    met = sum(v.verdict == MET for v in per)
+    sensitivity, breaks, driver = attribution(req, wp.drawn, per)
+    return WorldStatus(met, sum(v.verdict == NOT_MET for v in per), sum(v.verdict == UNDECIDED for v in per),
+                       len(per), wp.config.needed(), met >= wp.config.needed(), tuple(per), sensitivity, breaks,
+                       driver)
 
 
-def _attribution(req, worlds, per) -> dict:
-    """The world parameter that ranks most closely with the margin, and where it breaks the design."""
+def attribution(req: Requirement, worlds: list[World], per: list[WorldValue]) -> tuple[dict, str, str | None]:
+    """The world parameter that ranks most closely with the margin, and where it breaks the design.
+
+    Returns
+    -------
+    sensitivity : dict
+        Parameter -> Spearman correlation of its values with the margin across the worlds.
+    breaks : str
+        What breaks the design (or that nothing does; where it stays undecided).
+    driver : str or None
+        The parameter blamed (None without parameters).
+    """
     names = sorted({n for w in worlds for n in w.parameters})
-    ok = [i for i, v in enumerate(per) if math.isfinite(v["value"])]
-    margins = [req.margin(per[i]["value"]) for i in ok]
+    ok = [i for i, v in enumerate(per) if math.isfinite(v.value)]
+    margins = [req.margin(per[i].value) for i in ok]
     rho = {n: rank_correlation([worlds[i].parameters.get(n, math.nan) for i in ok], margins) for n in names}
-    failing = [i for i, v in enumerate(per) if v["verdict"] == NOT_MET]
-    straddling = [i for i, v in enumerate(per) if v["verdict"] == UNDECIDED]
+    failing = [i for i, v in enumerate(per) if v.verdict == NOT_MET]
+    straddling = [i for i, v in enumerate(per) if v.verdict == UNDECIDED]
     if not names:
-        return {"sensitivity": {}, "breaks": ""}
+        return {}, "", None
     driver = max(names, key=lambda n: (abs(rho[n]), n))
     follows = f"the margin follows {driver} most (Spearman {rho[driver]:+.2f})" if abs(rho[driver]) > 0 else ""
     undecided = (f"undecided in worlds {', '.join(str(worlds[i].index) for i in straddling)} (the interval "
                  "straddles the threshold when the seeds or the budget ran out)") if straddling else ""
     if not failing:  # no world fails it: no parameter is blamed for intervals that are only too wide
-        text = "; ".join(t for t in (undecided or "met in every world", follows) if t)
-        return {"sensitivity": rho, "breaks": text, "driver": driver}
+        return rho, "; ".join(t for t in (undecided or "met in every world", follows) if t), driver
     vals = [worlds[i].parameters.get(driver, math.nan) for i in failing]
     worst = max(vals) if rho[driver] > 0 else min(vals)
     side = "<=" if rho[driver] > 0 else ">="
     text = (f"{driver} {side} {worst:.3g} breaks it (not met in worlds "
             f"{', '.join(str(worlds[i].index) for i in failing)}; Spearman {rho[driver]:+.2f} with the margin)"
             + (f"; {undecided}" if undecided else ""))
-    return {"sensitivity": rho, "breaks": text, "driver": driver}
+    return rho, text, driver
 
 
-def _goodness(req, value: float) -> float:
+def _goodness(req: Requirement, value: float) -> float:
     """The score of a metric value oriented so that higher is better (log RMSE negated, logit accuracy)."""
     z = metric_to_score(req, value)
     return -z if req.smaller_is_better else z
 
 
-def worst_loss(req, done: list[dict]) -> float:
+def worst_loss(req: Requirement, done: list[Examined]) -> float:
     """The largest loss (score scale, >= 0) a world caused to any candidate in ``done`` (complete statuses)."""
     worst = 0.0
     for c in done:
-        for v in (c["status"] or {}).get("per_world", []):
-            e = v.get("effect", math.nan)
-            if math.isfinite(e):
-                worst = max(worst, e if req.smaller_is_better else -e)
+        for v in (c.status.per_world if c.status is not None else ()):
+            if math.isfinite(v.effect):
+                worst = max(worst, v.effect if req.smaller_is_better else -v.effect)
     return worst
 
 
-def next_candidate(search, req, done: list[dict]) -> dict | None:
+def next_candidate(evidence: Evidence, req: Requirement, done: list[Examined]) -> Candidate | None:
     """After a failed candidate: the cheapest met design whose pessimistic margin exceeds the worst world loss.
 
     Candidates are every design of the task verified *met* (the optimized and scanned candidates and the
     scans' trained designs) not examined yet; the margin is on the score scale, from the pessimistic end of
     the design's interval. None fit: the one with the largest margin (None when nothing is left).
     """
-    seen = {c["design"] for c in done}
+    seen = {c.design for c in done}
     loss = worst_loss(req, done)
     threshold = _goodness(req, req.threshold)
-    pool = {c["design"]: c for c in search.ordered_candidates(req)}
-    for d in search.trained_designs(req):
+    pool = {c.design: c for c in evidence.candidates(req)}
+    for d in evidence.trained_designs(req):
         if d not in pool:
-            pool[d] = {"design": d, "cost": search.cost(d, search.space), "trained": search.trained_value(req, d),
-                       "source": "scans, examined after a cheaper candidate failed in the worlds"}
+            pool[d] = Candidate(d, evidence.cost(d), "scans, examined after a cheaper candidate failed in the worlds",
+                                evidence.trained_value(req, d))
     rows = []
     for d, c in pool.items():
-        tv = c["trained"]
-        if d in seen or tv is None or tv["verdict"] != MET:
+        tv = c.trained
+        if d in seen or tv is None or tv.verdict != MET:
             continue
-        pessimistic = tv["hi"] if req.smaller_is_better else tv["lo"]
-        rows.append((_goodness(req, pessimistic) - threshold, c))
+        rows.append((_goodness(req, tv.pessimistic(req)) - threshold, c))
     if not rows:
         return None
     robust_enough = [c for m, c in rows if m > loss]
     if robust_enough:
-        return min(robust_enough, key=lambda c: (c["cost"], c["design"]))
-    return max(rows, key=lambda r: (r[0], -r[1]["cost"]))[1]
+        return min(robust_enough, key=lambda c: (c.cost, c.design))
+    return max(rows, key=lambda r: (r[0], -r[1].cost))[1]
 
 
-def examined(search, req) -> list[dict]:
+def examined(evidence: Evidence, req: Requirement) -> list[Examined]:
     """The requirement's met candidates in the order the worlds examine them, each with its ``status``.
 
     The cheapest met candidate first; after a candidate that does not hold, :func:`next_candidate`. At most
     ``[worlds] candidates``; the list stops after the first candidate that holds; a candidate whose status is
     None is being examined.
     """
-    cands = [c for c in search.ordered_candidates(req) if c["trained"] is not None and c["trained"]["verdict"] == MET]
-    out: list[dict] = []
+    cands = [c for c in evidence.candidates(req) if c.trained is not None and c.trained.verdict == MET]
+    out: list[Examined] = []
     c = cands[0] if cands else None
-    while c is not None and len(out) < search.worlds.config.candidates:
-        st = world_status(search, req, c["design"])
-        out.append({**c, "status": st})
-        if st is None or st["holds"]:
+    while c is not None and len(out) < evidence.worlds.config.candidates:
+        st = world_status(evidence, req, c.design)
+        out.append(Examined(c, st))
+        if st is None or st.holds:
             break
-        c = next_candidate(search, req, out)
+        c = next_candidate(evidence, req, out)
     return out
 
 
-def needed_references(search) -> list[tuple[World, str]]:
+def needed_references(evidence: Evidence) -> list[tuple[World, str]]:
     """World references the candidates being examined need and nobody simulated yet."""
-    wp, out = search.worlds, []
-    for req in search.requirements:
-        ex = examined(search, req)
-        if ex and ex[-1]["status"] is None:
-            layout = search._layout(ex[-1]["design"])
+    wp, out = evidence.worlds, []
+    for req in evidence.requirements:
+        ex = examined(evidence, req)
+        if ex and ex[-1].status is None:
+            layout = ex[-1].design.layout
             out += [(w, layout) for w in wp.worlds if (w.index, layout) not in wp.references]
     return list({(w.index, lay): (w, lay) for w, lay in out}.values())
 
 
-def world_jobs(search) -> list:
-    """The next evaluations of the candidates being examined: a first seed pair per world, more where undecided."""
-    wp, jobs = search.worlds, []
-    left = search.budget_left()
-    for req in search.requirements:
-        ex = examined(search, req)
-        if not ex or ex[-1]["status"] is not None:
+def world_runs(evidence: Evidence) -> list[WorldRun]:
+    """The next evaluations of the candidates being examined: a first seed pair per world (the world's run and the
+    control's), more where undecided while the budget lasts."""
+    wp, runs = evidence.worlds, []
+    left = evidence.budget_left()
+    for req in evidence.requirements:
+        ex = examined(evidence, req)
+        if not ex or ex[-1].status is not None:
             continue
-        d = ex[-1]["design"]
+        d = ex[-1].design
         for w in wp.drawn:
-            wv = world_value(search, req, d, w)
+            wv = world_value(evidence, req, d, w)
             if wv is None:
                 i = 0
-            elif _can_extend(search, wv) and left >= 2:
-                i, left = wv["runs"], left - 2
+            elif _can_extend(evidence, wv) and left >= 2:
+                i, left = wv.runs, left - 2
             else:
                 continue
-            jobs += [j for j in (_job(search, req, d, w, i), _job(search, req, d, wp.worlds[0], i)) if j is not None]
-    return jobs
+            runs += [WorldRun(req, d, w, i), WorldRun(req, d, wp.worlds[0], i)]
+    return runs
 
 
-def worlds_table(search) -> list[dict]:
+def worlds_table(evidence: Evidence) -> list[dict]:
     """Per requirement, every examined candidate: worlds held, needed, verdict counts, what breaks it."""
     rows = []
-    for req in search.requirements:
-        for c in examined(search, req):
-            st = c["status"]
-            d = c["design"]
+    wp = evidence.worlds
+    for req in evidence.requirements:
+        for c in examined(evidence, req):
+            st, d = c.status, c.design
+            counts = ({"met": st.met, "not_met": st.not_met, "undecided": st.undecided, "worlds": st.worlds,
+                       "needed": st.needed, "holds": st.holds, "breaks": st.breaks, "sensitivity": st.sensitivity}
+                      if st else {"met": None, "worlds": len(wp.drawn), "needed": wp.config.needed(), "holds": False,
+                                  "breaks": "not all evaluated (the run stopped)"})
             rows.append({"requirement": req.name, "task": req.task, "key": d.key(), "design": d,
-                         "cost": c["cost"], "complete": st is not None,
-                         **({k: st[k] for k in ("met", "not_met", "undecided", "worlds", "needed", "holds",
-                                               "breaks", "sensitivity")} if st else
-                            {"met": None, "worlds": len(search.worlds.drawn), "needed": search.worlds.config.needed(),
-                             "holds": False, "breaks": "not all evaluated (the run stopped)"}),
-                         "per_world": [] if st is None else [
-                             {"world": w.index, "parameters": w.parameters, **v}
-                             for w, v in zip(search.worlds.drawn, st["per_world"])]})
+                         "cost": c.candidate.cost, "complete": st is not None, **counts,
+                         "per_world": [] if st is None else [{"world": w.index, "parameters": w.parameters,
+                                                              **asdict(v)} for w, v in zip(wp.drawn, st.per_world)]})
     return rows

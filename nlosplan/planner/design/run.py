@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import platform
 import subprocess
@@ -33,13 +32,16 @@ from nlosplan.planner.design.catalog import keep as stability_keep
 from nlosplan.planner.design.catalog import kept_summary, run_catalog, stability_summary
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
+from nlosplan.planner.design.evaluation import Evaluation
 from nlosplan.planner.design.evaluators import evaluate
+from nlosplan.planner.design.evidence import Candidate
 from nlosplan.planner.design.executors import make_executor
 from nlosplan.planner.design.jobs import CatalogJob, ReferenceJob
-from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, optimize_jobs
+from nlosplan.planner.design.optimize import collect_candidates, optimize_choice
+from nlosplan.planner.design.references import real_reference_path, reference_paths, world_reference_path
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
-from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig
-from nlosplan.planner.design.space import Design, DesignSpace
+from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig, Stage
+from nlosplan.planner.design.space import Design, DesignSpace, parse_zones
 from nlosplan.planner.design.summary import summarize
 from nlosplan.planner.design.worlds import WorldsConfig, draw_worlds, world_sensor
 from nlosplan.sensor_models import resolve_sensor
@@ -264,16 +266,11 @@ class _Checkpoint:
 
 
 def _json_default(o):
-    if isinstance(o, Design):
+    if isinstance(o, (Design, Candidate)):
         return o.to_dict()
     if hasattr(o, "item"):
         return o.item()
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
-
-
-def _layout_design(space: DesignSpace, layout) -> Design:
-    """The design a layout's reference is simulated at (least blur, all bins and photons of the space)."""
-    return Design(layout, 1, space.sensor.n_bins, space.jitter_fwhm_ps[0], space.pulse_fwhm_ps[0], 1.0)
 
 
 def _prepare(job) -> dict:
@@ -346,14 +343,11 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
     """
     from nlosplan.planner.design.data import load_reference
 
-    sims, real, info, jobs = {}, {}, {}, []
+    real, info = {}, {}
     space, scenes = cfg.space, cfg.scenes
-    for z in space.zones:
-        sensor = _layout_design(space, z).sensor(space.sensor).replace(name=f"reference {z[0]}x{z[1]}")
-        path = out / "reference" / f"{z[0]}x{z[1]}_{scenes.key(sensor)}.npz"
-        sims[f"{z[0]}x{z[1]}"] = path
-        if not path.exists():
-            jobs.append(ReferenceJob(str(path), sensor, scenes, f"{z[0]}x{z[1]}"))
+    sims = reference_paths(out, space, scenes)
+    jobs = [ReferenceJob(str(path), space.layout_sensor(parse_zones(layout)), scenes, layout)
+            for layout, path in sims.items() if not path.exists()]
     stability = None
     if jobs:
         beside = " and the stability catalog" if catalog else ""
@@ -369,10 +363,9 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
                           drop_backgrounds=True, zones_hint="the real captures must have the capture sensor's zones "
                                                             "(give the matching --capture-sensor)")
         ref = reference_from_dataset(ds, captured, str(cfg.real))
-        path = out / "reference" / f"real_{hashlib.sha1(str(cfg.real).encode()).hexdigest()[:8]}.npz"
+        path = real_reference_path(out, cfg.real)
         ref.save(path)
-        for z in space.zones:
-            real[f"{z[0]}x{z[1]}"] = path  # unreachable layouts are reported per evaluation
+        real = {layout: path for layout in sims}  # unreachable layouts are reported per evaluation
         info["real"] = {"captures": int(len(ds)), "source": str(cfg.real), "sensor": captured.name}
     return sims, real, info, stability
 
@@ -469,42 +462,39 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
     search = DesignSearch(cfg.space, cfg.requirements, cfg.search, sims, cfg.cost, real or None, worlds)
     search.ingest(ckpt.results)
-    if ckpt.data.get("candidates") is not None:
-        cands = {k: [{**c, "design": Design.from_dict(c["design"])} for c in v]
-                 for k, v in ckpt.data["candidates"].items()}
-        search.stage = "optimize"
+    saved = ckpt.data.get("candidates")
+    if saved is not None:  # the optimize stage ran: the search continues after it
+        search.ingest_candidates({k: [Candidate.from_dict(c) for c in v] for k, v in saved.items()},
+                                 ckpt.data.get("optimize_log") or [])
     done = len(ckpt.results)
     while True:
         jobs = search.suggest()
-        if not jobs and search.stage == "optimize":
-            if ckpt.data.get("candidates") is None:
-                say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
-                log = [r for _, r in executor.map(optimize_choice, optimize_jobs(search))]
-                cands = collect_candidates(search, log, cfg.search.candidates)
-                ckpt.data["candidates"] = cands
-                ckpt.data["optimize_log"] = log
-                ckpt.save()
-            search.set_candidates(cands, ckpt.data["optimize_log"])
+        if not jobs and search.stage is Stage.OPTIMIZE:
+            say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
+            log = [r for _, r in executor.map(optimize_choice, search.optimize_jobs())]
+            cands = collect_candidates(search.evidence, log, cfg.search.candidates)
+            ckpt.data.update(candidates=cands, optimize_log=log)
+            ckpt.save()
+            search.ingest_candidates(cands, log)
             continue
-        if not jobs and search.stage == "worlds" and worlds is not None:
-            need = robust.needed_references(search)
-            if need:
-                search.add_world_references(_world_references(cfg, out, worlds, need, executor, say, cache))
-                continue
+        need = search.needed_references() if not jobs and search.stage is Stage.WORLDS else []
+        if need:
+            search.ingest_references(_world_references(cfg, out, worlds, need, executor, say, cache))
+            continue
         if not jobs:
             break
         total = done + len(jobs)
         say(f"{search.stage}: {len(jobs)} evaluations", done, total)
         for _, result in executor.map(evaluate, jobs):
-            search.ingest([result])
+            ev = Evaluation.from_record(result)
+            search.ingest([ev])
             ckpt.add(result)
             done += 1
-            say(f"{search.stage}: {result['evaluator']} {result['task']} {Design.from_dict(result['design']).key()}",
-                done, total)
+            say(f"{search.stage}: {ev.evaluator} {ev.task} {ev.design.key()}", done, total)
     if stability is None:
         stability = stability_summary(quick, cache, say)
     say("summary: writing")
-    result = summarize(search)
+    result = summarize(search.evidence)
     result["_refs"] = ref_info
     return result, stability
 
@@ -528,14 +518,12 @@ def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
 def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need, executor, say,
                       cache: bool = True) -> dict:
     """Simulate the references ``need`` lists (``(world, layout)``) on the executor; ``(index, layout) -> path``."""
-    from nlosplan.planner.design.space import parse_zones
-
     jobs, paths = [], {}
     for w, layout in need:
-        sensor = world_sensor(_layout_design(cfg.space, parse_zones(layout)), cfg.space.sensor, w.sensor)
+        sensor = world_sensor(cfg.space.layout_design(parse_zones(layout)), cfg.space.sensor, w.sensor)
         sensor = sensor.replace(name=f"reference {layout}, world {w.index}")
         scenes = replace(plan.scenes, scene_kwargs=w.scene)
-        path = out / "reference" / f"world{w.index}_{layout}_{scenes.key(sensor)}.npz"
+        path = world_reference_path(out, w.index, layout, scenes, sensor)
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")

@@ -23,7 +23,7 @@ from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models import SensorConfig, resolve_sensor
 from nlosplan.simulators.presets.scene_model import DEFAULT_SENSOR
 
-__all__ = ["AXES", "Design", "DesignSpace", "parse_zones"]
+__all__ = ["AXES", "Design", "DesignSpace", "layout_name", "parse_zones"]
 
 #: The design parameters, in report order, with their units and which direction is cheaper.
 AXES: dict[str, dict] = {
@@ -51,6 +51,11 @@ def parse_zones(text) -> tuple[int, int]:
     if not (1 <= int(r) <= 16 and 1 <= int(c) <= 16):
         raise UserError(f"zones {r}x{c}: rows and columns must be 1 to 16")
     return int(r), int(c)
+
+
+def layout_name(zones) -> str:
+    """A zone layout as files, keys and reports name it: ``(3, 3)`` -> ``"3x3"``."""
+    return f"{zones[0]}x{zones[1]}"
 
 
 @dataclass(frozen=True, order=True)
@@ -96,6 +101,11 @@ class Design:
     def n_zones(self) -> int:
         return self.zones[0] * self.zones[1]
 
+    @property
+    def layout(self) -> str:
+        """Its zone layout's name, e.g. ``"3x3"`` (:func:`layout_name`)."""
+        return layout_name(self.zones)
+
     def key(self) -> str:
         """A short stable name, e.g. ``3x3/b1x128/j0/p0/n1``."""
         return (f"{self.zones[0]}x{self.zones[1]}/b{self.bin_factor}x{self.n_bins}/j{self.jitter_fwhm_ps:g}"
@@ -105,9 +115,7 @@ class Design:
         return replace(self, **changes)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["zones"] = f"{self.zones[0]}x{self.zones[1]}"
-        return d
+        return {**asdict(self), "zones": self.layout}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Design":
@@ -199,11 +207,23 @@ class DesignSpace:
         return self._sensor
 
     def reference_design(self) -> Design:
-        """The reference sensor as a design (its zones, bin width, bins; no added blur; all its photons)."""
+        """The reference sensor as a design: where the one-at-a-time lines start, and the learners are compared.
+
+        Its zones, bin width and bins, no added blur, all its photons (each clipped into the space).
+        """
         s = self.sensor
         zones = (s.zones_rows, s.zones_cols)
         return Design(zones, 1, min(s.n_bins, self.n_bins[1]), max(s.jitter_fwhm_ps, self.jitter_fwhm_ps[0]),
                       max(s.pulse_fwhm_ps, self.pulse_fwhm_ps[0]), min(1.0, self.photon_fraction[1]))
+
+    def layout_design(self, zones) -> Design:
+        """The design a zone layout's reference data is simulated at: the least blur, every bin of the reference
+        sensor and all its photons, so that every design of the layout is reached by degrading it."""
+        return Design(zones, 1, self.sensor.n_bins, self.jitter_fwhm_ps[0], self.pulse_fwhm_ps[0], 1.0)
+
+    def layout_sensor(self, zones) -> SensorConfig:
+        """The sensor of :meth:`layout_design`, named ``reference RxC`` (its name is part of the reference's key)."""
+        return self.layout_design(zones).sensor(self.sensor).replace(name=f"reference {layout_name(zones)}")
 
     def max_bins(self, bin_factor: int) -> int:
         """Largest number of bins at a bin width (the reference window)."""

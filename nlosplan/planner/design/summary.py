@@ -30,10 +30,13 @@ import math
 import numpy as np
 
 from nlosplan.planner.design import robust
+from nlosplan.planner.design.evaluation import Evaluator, Status
+from nlosplan.planner.design.evidence import Candidate, Evidence
+from nlosplan.planner.design.lines import CONTINUOUS, MORE_IS_BETTER, lines, line_points
 from nlosplan.planner.design.requirements import Requirement
-from nlosplan.planner.design.search import CONTINUOUS, MORE_IS_BETTER, DesignSearch
-from nlosplan.planner.design.space import AXES, Design
-from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, VERDICT_DEFINITIONS, metric_to_score)
+from nlosplan.planner.design.space import AXES, Design, DesignSpace
+from nlosplan.planner.design.verdicts import (MET, NOT_MET, UNDECIDED, VERDICT_DEFINITIONS, Estimate, Verdict,
+                                              metric_to_score, seed_interval)
 
 __all__ = ["summarize", "requirement_row", "pareto_front", "PARAMETERS", "metric_definitions", "user_design"]
 
@@ -53,21 +56,21 @@ def metric_definitions() -> dict:
     return {**METRIC_DEFINITIONS, **{f"verdict {k}": v for k, v in VERDICT_DEFINITIONS.items()}}
 
 
-def user_design(d: Design | None, search: DesignSearch) -> dict | None:
+def user_design(d: Design | None, space: DesignSpace) -> dict | None:
     """A design in user units: zones ``"RxC"``, ``bin_width_ps``, ``n_bins``, jitter, pulse, photon fraction."""
     if d is None:
         return None
-    return {"zones": f"{d.zones[0]}x{d.zones[1]}", "bin_width_ps": d.bin_factor * search.space.sensor.bin_width_ps,
+    return {"zones": d.layout, "bin_width_ps": d.bin_factor * space.sensor.bin_width_ps,
             "n_bins": d.n_bins, "jitter_fwhm_ps": d.jitter_fwhm_ps, "pulse_fwhm_ps": d.pulse_fwhm_ps,
             "photon_fraction": d.photon_fraction}
 
 
-def _user_value(search: DesignSearch, axis: str, v):
+def _user_value(space: DesignSpace, axis: str, v):
     """An axis value in user units (a zone count as the layout's ``"RxC"``)."""
     if v is None:
         return None
     if axis == "zones":
-        return next((f"{r}x{c}" for r, c in search.space.zones if r * c == round(v)), f"{v:g} zones")
+        return next((f"{r}x{c}" for r, c in space.zones if r * c == round(v)), f"{v:g} zones")
     return float(v)
 
 
@@ -89,52 +92,49 @@ def _crossing(req: Requirement, xs, vals, axis: str, discrete: bool):
     return None
 
 
-def requirement_row(search: DesignSearch, req: Requirement, axis: str) -> dict:
+def requirement_row(evidence: Evidence, req: Requirement, axis: str) -> dict:
     """The least hardware along one axis that meets ``req``, with its verdict (see the module notes)."""
-    pts = search.line_points(req, axis, search.base)
+    pts = line_points(evidence, req, axis, evidence.base)
     if MORE_IS_BETTER[axis] is False:
         pts = pts[::-1]  # cheap -> costly
-    pts = [p for p in pts if p["trained"] is not None or p["screened"] or p["implied"]]
-    xs = [p["x"] for p in pts]
-    tv = [None if p["trained"] is None else p["trained"]["value"] for p in pts]
-    opt = [None if p["trained"] is None else p["trained"]["lo" if req.smaller_is_better else "hi"] for p in pts]
-    pes = [None if p["trained"] is None else p["trained"]["hi" if req.smaller_is_better else "lo"] for p in pts]
+    pts = [p for p in pts if p.judged]
+    xs = [p.x for p in pts]
+    tv = [None if p.trained is None else p.trained.value for p in pts]
+    opt = [None if p.trained is None else p.trained.optimistic(req) for p in pts]
+    pes = [None if p.trained is None else p.trained.pessimistic(req) for p in pts]
     discrete = axis not in CONTINUOUS and axis != "n_bins"
     value = _crossing(req, xs, tv, axis, discrete)
     a, b = _crossing(req, xs, opt, axis, discrete), _crossing(req, xs, pes, axis, discrete)
     kind = "minimum" if MORE_IS_BETTER[axis] else "maximum"
     name, unit = PARAMETERS[axis]
     verdict = MET if b is not None else (UNDECIDED if a is not None else NOT_MET)
-    row = {"task": req.task, "requirement": req.name, "parameter": name, "axis": axis, "label": AXES[axis]["label"],
-           "unit": unit, kind: None, "interval": None, "verdict": verdict, "feasible": verdict == MET,
-           "points": len(pts), "screened_out": sum(p["screened"] for p in pts),
-           "implied_not_met": sum(p["implied"] for p in pts), "note": ""}
-    notes = []
+    screened, implied = sum(p.screened for p in pts), sum(p.implied for p in pts)
+    least, interval, notes = None, None, []
     if value is not None or a is not None:
         centre = value if value is not None else a
         ends = [v for v in (a, b, centre) if v is not None]
         i = xs.index(centre) if centre in xs else -1
         if i > 0 and tv[i - 1] is None:  # the cheaper neighbour was not trained: the threshold lies between
             ends.append(xs[i - 1])
-            why = "screened out by the bound" if pts[i - 1]["screened"] else "implied not met"
+            why = "screened out by the bound" if pts[i - 1].screened else "implied not met"
             notes.append(f"between {xs[i - 1]:.4g} ({why}) and {centre:.4g}")
         if b is None:
             notes.append("undecided: the pessimistic end of the interval never meets it within the range")
             ends.append(xs[-1])
-        lo_end, hi_end = min(ends), max(ends)
-        row[kind] = _user_value(search, axis, value)
-        row["interval"] = [_user_value(search, axis, lo_end), _user_value(search, axis, hi_end)]
+        least = _user_value(evidence.space, axis, value)
+        interval = [_user_value(evidence.space, axis, min(ends)), _user_value(evidence.space, axis, max(ends))]
         if verdict == MET and centre == xs[0]:
             notes.append("met across the whole range (the limit is the space's)")
     elif pts:
         best = max((v for v in tv if v is not None), default=None, key=lambda v: -v if req.smaller_is_better else v)
         notes.append("not met: even the optimistic end fails at every tested value"
                      + (f" (best {best:.3g})" if best is not None else "")
-                     + (f"; {row['screened_out']} screened out by the bound" if row["screened_out"] else ""))
+                     + (f"; {screened} screened out by the bound" if screened else ""))
     else:
         notes.append("not evaluated")
-    row["note"] = "; ".join(notes)
-    return row
+    return {"task": req.task, "requirement": req.name, "parameter": name, "axis": axis, "label": AXES[axis]["label"],
+            "unit": unit, kind: least, "interval": interval, "verdict": verdict, "feasible": verdict == MET,
+            "points": len(pts), "screened_out": screened, "implied_not_met": implied, "note": "; ".join(notes)}
 
 
 def pareto_front(points: list[dict], smaller_is_better: bool) -> list[dict]:
@@ -149,80 +149,83 @@ def pareto_front(points: list[dict], smaller_is_better: bool) -> list[dict]:
     return front
 
 
-def _designs_with_trained(search: DesignSearch, req: Requirement) -> list[dict]:
+def _estimate_fields(t: Estimate) -> dict:
+    """An estimate as the JSON's design points carry it (the old ``trained_value`` dict, verdict last)."""
+    return {"value": t.value, "lo": t.lo, "hi": t.hi, "seeds": t.seeds, "seconds": t.seconds, "sd_run": t.sd_run,
+            "quantile": t.quantile, "verdict": t.verdict}
+
+
+def _designs_with_trained(evidence: Evidence, req: Requirement) -> list[tuple[Design, float, Estimate]]:
     out = []
-    for d in search.trained_designs(req):
-        t = search.trained_value(req, d)
+    for d in evidence.trained_designs(req):
+        t = evidence.trained_value(req, d)
         if t is not None:
-            out.append({"design": d, "key": d.key(), "cost": search.cost(d, search.space), **t})
-    return sorted(out, key=lambda p: p["cost"])
+            out.append((d, evidence.cost(d), t))
+    return sorted(out, key=lambda p: p[1])
 
 
 def _fmt(req: Requirement, v: float) -> str:
     return f"{100 * v:.1f} cm" if req.smaller_is_better else f"{100 * v:.1f} %"
 
 
-def _entry(search, req, c: dict, verdict: str, decision: str, source: str) -> dict:
-    tv = c["trained"]
-    return {"requirement": req.name, "task": req.task, "verdict": verdict, "design": user_design(c["design"], search),
-            "key": c["design"].key(), "cost": c["cost"], "value": tv["value"], "lo": tv["lo"], "hi": tv["hi"],
-            "seeds": tv["seeds"], "margin": req.margin(tv["value"]), "source": source, "decision": decision,
-            "learner": search.learner(req.task), "worlds": None}
+def _entry(evidence: Evidence, req: Requirement, c: Candidate, verdict: Verdict, decision: str,
+           worlds: robust.WorldStatus | None = None) -> dict:
+    tv = c.trained
+    return {"requirement": req.name, "task": req.task, "verdict": verdict,
+            "design": user_design(c.design, evidence.space), "key": c.design.key(), "cost": c.cost, "value": tv.value,
+            "lo": tv.lo, "hi": tv.hi, "seeds": tv.seeds, "margin": req.margin(tv.value),
+            "source": f"{c.source}, {tv.seeds} seed(s)", "decision": decision, "learner": evidence.learner(req.task),
+            "worlds": None if worlds is None else {"met": worlds.met, "undecided": worlds.undecided,
+                                                   "not_met": worlds.not_met, "worlds": worlds.worlds,
+                                                   "needed": worlds.needed, "holds": worlds.holds,
+                                                   "breaks": worlds.breaks}}
 
 
-def _worlds_of(st: dict | None) -> dict | None:
-    if st is None:
-        return None
-    return {k: st[k] for k in ("met", "undecided", "not_met", "worlds", "needed", "holds", "breaks")}
+def _met_in_worlds(evidence: Evidence, req: Requirement, met: list[Candidate]) -> dict:
+    """The cheapest met candidate that holds in the worlds, or *undecided* and why (see the module notes)."""
+    ex = robust.examined(evidence, req)
+    held = next((e for e in ex if e.status is not None and e.status.holds), None)
+    if held is not None:
+        decision = evidence.decision(req, held.candidate.trained)
+        if held.design != met[0].design:
+            first = ex[0].status
+            decision += (f"; the cheaper {met[0].design.key()} is met in the nominal model but in only "
+                         f"{first.met} of {first.worlds} worlds ({first.breaks})")
+        return _entry(evidence, req, held.candidate, MET, decision, held.status)
+    if ex and ex[-1].status is not None:
+        st = ex[0].status
+        return _entry(evidence, req, met[0], UNDECIDED, f"met in the nominal model, but in only {st.met} of "
+                      f"{st.worlds} worlds (needs {st.needed}): {st.breaks}; {len(ex)} candidate(s) examined", st)
+    return _entry(evidence, req, met[0], UNDECIDED,
+                  "met in the nominal model; the worlds were not all evaluated (the run stopped)")
 
 
-def _cheapest(search: DesignSearch, req: Requirement, trained: list[dict]) -> dict:
-    cands = search.ordered_candidates(req)
+def _cheapest(evidence: Evidence, req: Requirement, trained: list[tuple[Design, float, Estimate]]) -> dict:
+    cands = evidence.candidates(req)
     scans_only = not cands
     if scans_only:  # no candidate was verified (no optimize stage, or nothing met on the scans)
-        cands = [{"design": p["design"], "cost": p["cost"], "source": "scans (not verified over seeds)",
-                  "trained": search.trained_value(req, p["design"])} for p in trained]
-    met = [c for c in cands if c["trained"] is not None and c["trained"]["verdict"] == MET]
-    src = lambda c: f"{c.get('source', 'scans')}, {c['trained']['seeds']} seed(s)"  # noqa: E731
+        cands = [Candidate(d, cost, "scans (not verified over seeds)", evidence.trained_value(req, d))
+                 for d, cost, _ in trained]
+    met = [c for c in cands if c.trained is not None and c.trained.verdict == MET]
     if met:
-        if search.worlds is None or scans_only:
-            c = met[0]
-            return _entry(search, req, c, MET, search.decision(req, c["trained"]), src(c))
-        ex = robust.examined(search, req)
-        held = next((e for e in ex if e["status"] is not None and e["status"]["holds"]), None)
-        if held is not None:
-            out = _entry(search, req, held, MET, search.decision(req, held["trained"]), src(held))
-            out["worlds"] = _worlds_of(held["status"])
-            if held["design"] != met[0]["design"]:
-                first = ex[0]["status"]
-                out["decision"] += (f"; the cheaper {met[0]['design'].key()} is met in the nominal model but in only "
-                                    f"{first['met']} of {first['worlds']} worlds ({first['breaks']})")
-            return out
-        last = ex[-1] if ex else None
-        c = met[0]
-        out = _entry(search, req, c, UNDECIDED, search.decision(req, c["trained"]), src(c))
-        if last is not None and last["status"] is not None:
-            st = ex[0]["status"]
-            out["worlds"] = _worlds_of(st)
-            out["decision"] = (f"met in the nominal model, but in only {st['met']} of {st['worlds']} worlds "
-                               f"(needs {st['needed']}): {st['breaks']}; {len(ex)} candidate(s) examined")
-        else:
-            out["decision"] = "met in the nominal model; the worlds were not all evaluated (the run stopped)"
-        return out
-    undecided = [c for c in cands if c["trained"] is not None and c["trained"]["verdict"] == UNDECIDED]
+        if evidence.worlds is None or scans_only:
+            return _entry(evidence, req, met[0], MET, evidence.decision(req, met[0].trained))
+        return _met_in_worlds(evidence, req, met)
+    undecided = [c for c in cands if c.trained is not None and c.trained.verdict == UNDECIDED]
     if undecided:
         c = undecided[0]
-        why = (f"the cheapest undecided scan: {c['trained']['seeds']} run(s), its mean "
-               f"{'meets' if req.met(c['trained']['value']) else 'misses'} it; no scanned design met it on average "
-               "to be verified") if scans_only else search.decision(req, c["trained"])
-        return _entry(search, req, c, UNDECIDED, why, src(c))
-    best = max(trained, key=lambda p: -p["value"] if req.smaller_is_better else p["value"], default=None)
-    bounds = [r["value"] for r in search.results.values() if r["task"] == req.task and r["evaluator"] == "bound"
-              and r["status"] == "ok" and math.isfinite(r["value"])]
+        why = (f"the cheapest undecided scan: {c.trained.seeds} run(s), its mean "
+               f"{'meets' if req.met(c.trained.value) else 'misses'} it; no scanned design met it on average "
+               "to be verified") if scans_only else evidence.decision(req, c.trained)
+        return _entry(evidence, req, c, UNDECIDED, why)
+    best = max((t.value for _, _, t in trained), key=lambda v: -v if req.smaller_is_better else v, default=None)
+    bounds = [r.value for r in evidence.records() if r.task == req.task and r.evaluator is Evaluator.BOUND
+              and r.finite]
     best_bound = (min(bounds) if req.smaller_is_better else max(bounds)) if bounds else None
     bound_meets = best_bound is not None and req.met(best_bound)
-    learners = f"today's learners ({', '.join(search.config.models)}; {search.learner(req.task)} chosen) reach"
-    reach = f"{learners} {_fmt(req, best['value'])} at best" if best is not None else "no learner was trained"
+    learners = (f"today's learners ({', '.join(evidence.config.models)}; {evidence.learner(req.task)} chosen) "
+                "reach")
+    reach = f"{learners} {_fmt(req, best)} at best" if best is not None else "no learner was trained"
     bound = "the Cramér–Rao bound" if req.smaller_is_better else "the ideal observer"
     if bound_meets:
         note = f"reachable in principle ({bound} reaches {_fmt(req, best_bound)}); {reach}"
@@ -231,85 +234,114 @@ def _cheapest(search: DesignSearch, req: Requirement, trained: list[dict]) -> di
                 + (f"; {bound} reaches only {_fmt(req, best_bound)}" if best_bound is not None else ""))
     return {"requirement": req.name, "task": req.task, "verdict": NOT_MET, "design": None, "key": None, "cost": None,
             "value": None, "lo": None, "hi": None, "seeds": None, "margin": None, "source": "none",
-            "decision": note, "learner": search.learner(req.task), "worlds": None,
-            "best_trained": None if best is None else best["value"], "best_bound": best_bound,
-            "bound_meets": bound_meets}
+            "decision": note, "learner": evidence.learner(req.task), "worlds": None, "best_trained": best,
+            "best_bound": best_bound, "bound_meets": bound_meets}
 
 
-def _curves(search: DesignSearch, req: Requirement) -> list[dict]:
+def _curves(evidence: Evidence, req: Requirement) -> list[dict]:
     out = []
-    for axis, layout, base, _ in search.lines():
-        pts = search.line_points(req, axis, base)
-        out.append({"requirement": req.name, "axis": axis, "parameter": PARAMETERS[axis][0], "zones": layout,
-                    "points": [{"x": p["x"], "bound": p["bound"], "screened": p["screened"], "implied": p["implied"],
-                                **({"value": p["trained"]["value"], "lo": p["trained"]["lo"], "hi": p["trained"]["hi"],
-                                    "verdict": p["trained"]["verdict"]}
-                                   if p["trained"] else {"value": None, "lo": None, "hi": None, "verdict": None})}
+    for line in lines(evidence.space, evidence.base, evidence.config.grid_points):
+        pts = line_points(evidence, req, line.axis, line.base)
+        out.append({"requirement": req.name, "axis": line.axis, "parameter": PARAMETERS[line.axis][0],
+                    "zones": line.layout,
+                    "points": [{"x": p.x, "bound": p.bound, "screened": p.screened, "implied": p.implied,
+                                **({"value": p.trained.value, "lo": p.trained.lo, "hi": p.trained.hi,
+                                    "verdict": p.trained.verdict}
+                                   if p.trained else {"value": None, "lo": None, "hi": None, "verdict": None})}
                                for p in pts]})
     return out
 
 
-def _evaluators(search: DesignSearch) -> list[dict]:
-    rows = {}
-    for r in search.results.values():
-        ev = r["evaluator"] + (" (worlds)" if r.get("world") is not None else "")
-        model = r["fidelity"].get("model", "") if r["evaluator"] != "bound" else ""
-        rows.setdefault((ev, r["task"], model), []).append(r)
+def _evaluators(evidence: Evidence) -> list[dict]:
+    rows: dict[tuple, list] = {}
+    for r in evidence.records():
+        ev = r.evaluator + (" (worlds)" if r.world is not None else "")
+        rows.setdefault((ev, r.task, r.model), []).append(r)
     out = []
     for (ev, task, model), rs in sorted(rows.items()):
-        ok = [r for r in rs if r["status"] == "ok" and math.isfinite(r["value"])]
-        half = [0.5 * (r["hi"] - r["lo"]) for r in ok if math.isfinite(r["hi"]) and math.isfinite(r["lo"])]
+        ok = [r for r in rs if r.finite]
+        half = [0.5 * (r.hi - r.lo) for r in ok if math.isfinite(r.hi) and math.isfinite(r.lo)]
         out.append({"evaluator": ev, "task": task, "model": model, "evaluations": len(rs), "ok": len(ok),
-                    "unreachable": sum(r["status"] == "unreachable" for r in rs),
-                    "failed": sum(r["status"] == "failed" for r in rs),
-                    "median_seconds": float(np.median([r["seconds"] for r in rs])) if rs else math.nan,
-                    "total_seconds": float(sum(r["seconds"] for r in rs)),
+                    "unreachable": sum(r.status is Status.UNREACHABLE for r in rs),
+                    "failed": sum(r.status is Status.FAILED for r in rs),
+                    "median_seconds": float(np.median([r.seconds for r in rs])) if rs else math.nan,
+                    "total_seconds": float(sum(r.seconds for r in rs)),
                     "median_half_interval": float(np.median(half)) if half else math.nan,
-                    "fidelity": rs[0]["fidelity"]})
+                    "fidelity": rs[0].fidelity})
     return out
 
 
-def _worlds_summary(search: DesignSearch) -> dict | None:
-    wp = search.worlds
+def _learner_table(evidence: Evidence) -> list[dict]:
+    """Every candidate model on the reference design, per task: mean metric, interval, seconds, chosen."""
+    rows = []
+    for req in evidence.task_requirements():
+        chosen = evidence.learner(req.task)
+        for m in evidence.config.models:
+            recs = [evidence.run(Evaluator.TRAINED, req, evidence.base, s, model=m)
+                    for s in range(evidence.config.max_seeds)]
+            tv = seed_interval(req, [r for r in recs if r is not None], evidence.spread(req))
+            rows.append({"task": req.task, "requirement": req.name, "model": m, "chosen": m == chosen,
+                         **({"value": tv.value, "lo": tv.lo, "hi": tv.hi, "seeds": tv.seeds,
+                             "seconds_per_run": tv.seconds / tv.seeds} if tv else
+                            {"value": None, "lo": None, "hi": None, "seeds": 0, "seconds_per_run": None})})
+    return rows
+
+
+def _disagreements(evidence: Evidence, req: Requirement) -> list[dict]:
+    """Real against simulated trained metrics of the same designs (real captures only); ``disagree`` where their
+    95 % intervals do not overlap."""
+    rows = []
+    for d in evidence.trained_designs(req):
+        real, sim = evidence.trained_value(req, d), evidence.run(Evaluator.TRAINED_SIM, req, d)
+        if real is None or sim is None or not sim.ok:
+            continue
+        rows.append({"requirement": req.name, "design": d.key(), "real": real.value, "real_lo": real.lo,
+                     "real_hi": real.hi, "sim": sim.value, "sim_lo": sim.lo, "sim_hi": sim.hi,
+                     "disagree": bool(real.hi < sim.lo or sim.hi < real.lo)})
+    return rows
+
+
+def _worlds_summary(evidence: Evidence) -> dict | None:
+    wp = evidence.worlds
     if wp is None:
         return None
-    rows = robust.worlds_table(search)
-    for r in rows:
-        r["design"] = user_design(r["design"], search)
+    rows = [{**r, "design": user_design(r["design"], evidence.space)} for r in robust.worlds_table(evidence)]
     return {"count": len(wp.drawn), "quorum": wp.config.quorum, "needed": wp.config.needed(),
             "scene_step": wp.config.scene_step, "scenes_per_world": wp.scenes.n_scenes,
             "variance_factor": wp.scene_ratio, "sources": wp.sources,
             "worlds": [{"world": w.index, "parameters": w.parameters} for w in wp.drawn], "candidates": rows}
 
 
-def summarize(search: DesignSearch) -> dict:
-    """The answer of a finished search (JSON-ready: designs in user units)."""
+def summarize(evidence: Evidence) -> dict:
+    """The answer of a search's evidence (JSON-ready: designs in user units)."""
     rows, cheapest, pareto, curves, gaps = [], [], {}, [], {}
-    for req in search.requirements:
-        for axis in search.space.axes:
-            rows.append(requirement_row(search, req, axis))
-        trained = _designs_with_trained(search, req)
-        cheapest.append(_cheapest(search, req, trained))
-        pareto[req.name] = [{**p, "design": user_design(p["design"], search)}
-                            for p in pareto_front(trained, req.smaller_is_better)]
-        curves += _curves(search, req)
-        gaps[req.name] = search.gap(req)
-    failures = [{"key": r["key"], "evaluator": r["evaluator"], "task": r["task"],
-                 "design": Design.from_dict(r["design"]).key(), "reason": r["reason"]}
-                for r in search.results.values() if r["status"] == "failed"]
-    disagreements = [row for req in search.requirements for row in search.disagreements(req)]
-    unreachable = sorted({f"{Design.from_dict(r['design']).key()}: {r['reason']}"
-                          for r in search.results.values() if r["status"] == "unreachable"})
-    spreads = {req.name: {"sd_score": search.spread(req).sd, "dof": search.spread(req).dof,
-                          "designs": search.spread(req).designs} for req in search.requirements}
-    return {"requirements": rows, "cheapest": cheapest, "unreachable": unreachable, "disagreements": disagreements,
-            "reference_bin_ps": search.space.sensor.bin_width_ps, "pareto": pareto, "curves": curves,
-            "evaluators": _evaluators(search), "gap": gaps, "failures": failures,
+    space = evidence.space
+    for req in evidence.requirements:
+        rows += [requirement_row(evidence, req, axis) for axis in space.axes]
+        trained = _designs_with_trained(evidence, req)
+        cheapest.append(_cheapest(evidence, req, trained))
+        points = [{"design": d, "key": d.key(), "cost": cost, **_estimate_fields(t)} for d, cost, t in trained]
+        pareto[req.name] = [{**p, "design": user_design(p["design"], space)}
+                            for p in pareto_front(points, req.smaller_is_better)]
+        curves += _curves(evidence, req)
+        gaps[req.name] = evidence.gap(req).to_dict()
+    records = list(evidence.records())
+    failures = [{"key": r.key, "evaluator": r.evaluator, "task": r.task, "design": r.design.key(), "reason": r.reason}
+                for r in records if r.status is Status.FAILED]
+    unreachable = sorted({f"{r.design.key()}: {r.reason}" for r in records if r.status is Status.UNREACHABLE})
+    spreads = {}
+    for req in evidence.requirements:
+        sp = evidence.spread(req)
+        spreads[req.name] = {"sd_score": sp.sd, "dof": sp.dof, "designs": sp.designs}
+    return {"requirements": rows, "cheapest": cheapest, "unreachable": unreachable,
+            "disagreements": [row for req in evidence.requirements for row in _disagreements(evidence, req)],
+            "reference_bin_ps": space.sensor.bin_width_ps, "pareto": pareto, "curves": curves,
+            "evaluators": _evaluators(evidence), "gap": gaps, "failures": failures,
             "optimize": [{k: v for k, v in r.items() if k != "design"} | {"design": r.get("design")}
-                         for r in search.optimize_log],
-            "learners": search.learner_table(), "worlds": _worlds_summary(search), "spread": spreads,
-            "budget": {"extra_evaluations": search.config.budget, "spent": search.extra_spent(),
-                       "max_seeds": search.config.max_seeds},
+                         for r in evidence.optimize_log],
+            "learners": _learner_table(evidence), "worlds": _worlds_summary(evidence), "spread": spreads,
+            "budget": {"extra_evaluations": evidence.config.budget, "spent": evidence.extra_spent(),
+                       "max_seeds": evidence.config.max_seeds},
             "metric_definitions": metric_definitions(),
-            "reference_design": user_design(search.base, search), "reference_sensor": search.space.sensor.name,
-            "requirements_asked": [r.name for r in search.requirements], "evaluations": len(search.results)}
+            "reference_design": user_design(evidence.base, space), "reference_sensor": space.sensor.name,
+            "requirements_asked": [r.name for r in evidence.requirements], "evaluations": len(evidence)}

@@ -26,24 +26,36 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
-__all__ = ["MET", "NOT_MET", "UNDECIDED", "VERDICTS", "VERDICT_DEFINITIONS", "Spread", "verdict", "metric_to_score",
-           "score_to_metric", "pooled_spread", "seed_interval", "rank_correlation"]
+__all__ = ["Verdict", "MET", "NOT_MET", "UNDECIDED", "VERDICTS", "VERDICT_DEFINITIONS", "Z95", "Spread", "Estimate",
+           "verdict", "metric_to_score", "score_to_metric", "pooled_spread", "within_sd", "seed_interval",
+           "rank_correlation"]
 
-MET, NOT_MET, UNDECIDED = "met", "not met", "undecided"
-VERDICTS = (MET, NOT_MET, UNDECIDED)
+
+class Verdict(StrEnum):
+    """A requirement's three-valued verdict; a member is its text (``Verdict.NOT_MET == "not met"``)."""
+
+    MET = "met"
+    NOT_MET = "not met"
+    UNDECIDED = "undecided"
+
+
+MET, NOT_MET, UNDECIDED = Verdict.MET, Verdict.NOT_MET, Verdict.UNDECIDED
+VERDICTS = tuple(Verdict)
 #: What each verdict means (the report's and the JSON's ``metric_definitions``).
 VERDICT_DEFINITIONS = {
     MET: "the pessimistic end of the 95 % interval meets the requirement",
     NOT_MET: "even the optimistic end of the 95 % interval fails it",
     UNDECIDED: "the 95 % interval straddles the threshold (more seeds may decide it)",
 }
-_Z = 1.959963984540054
+#: The normal 97.5 % quantile: the 95 % interval's half-width in standard errors when no pooled spread is known.
+Z95 = 1.959963984540054
 
 
-def verdict(req, lo: float, hi: float) -> str:
+def verdict(req, lo: float, hi: float) -> Verdict:
     """``met``, ``not met`` or ``undecided`` for an interval ``[lo, hi]`` (NaN: undecided)."""
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return UNDECIDED
@@ -113,22 +125,62 @@ def pooled_spread(req, groups) -> Spread:
     return Spread(ss / dof if dof else math.nan, dof, n)
 
 
-def _within_sd(req, rec: dict) -> float:
-    """A run's own standard error on the score scale, from its bootstrap interval (NaN if none)."""
-    lo, hi = rec.get("lo", math.nan), rec.get("hi", math.nan)
+def within_sd(req, run) -> float:
+    """A run's own standard error on the score scale, from its bootstrap interval ``run.lo``, ``run.hi`` (NaN if none)."""
+    lo, hi = run.lo, run.hi
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return math.nan
-    return abs(metric_to_score(req, hi) - metric_to_score(req, lo)) / (2 * _Z)
+    return abs(metric_to_score(req, hi) - metric_to_score(req, lo)) / (2 * Z95)
 
 
-def seed_interval(req, recs: list[dict], spread: Spread, *, scale: float = 1.0) -> dict | None:
+@dataclass(frozen=True)
+class Estimate:
+    """A design's metric over its seed runs: the mean, the 95 % interval of that mean and its verdict.
+
+    Attributes
+    ----------
+    value : float
+        Mean of the runs (m for ``loc_rmse``, a fraction for accuracies).
+    lo, hi : float
+        The 95 % interval of the mean (same unit).
+    verdict : Verdict
+        Of ``[lo, hi]`` against the requirement.
+    seeds : int
+        Runs averaged.
+    seconds : float
+        Their run time, s (summed).
+    sd_run : float
+        One run's standard deviation on the score scale.
+    quantile : float
+        The quantile the half-width used (Student's t or :data:`Z95`).
+    """
+
+    value: float
+    lo: float
+    hi: float
+    verdict: Verdict
+    seeds: int
+    seconds: float
+    sd_run: float
+    quantile: float
+
+    def optimistic(self, req) -> float:
+        """The end of the interval on the requirement's good side (``lo`` for an error, ``hi`` for an accuracy)."""
+        return self.lo if req.smaller_is_better else self.hi
+
+    def pessimistic(self, req) -> float:
+        """The other end: ``met`` when it meets the requirement."""
+        return self.hi if req.smaller_is_better else self.lo
+
+
+def seed_interval(req, runs, spread: Spread, *, scale: float = 1.0) -> Estimate | None:
     """Mean over seed runs with the 95 % interval of that mean (see the module notes).
 
     Parameters
     ----------
     req : Requirement
-    recs : list of dict
-        One evaluation record per seed (``value``, ``lo``, ``hi``, ``seconds``); failed ones are left out.
+    runs : sequence of Evaluation
+        One evaluation per seed (``value``, ``lo``, ``hi``, ``seconds``, ``status``); failed ones are left out.
     spread : Spread
         The task's pooled run-to-run variance.
     scale : float
@@ -136,16 +188,15 @@ def seed_interval(req, recs: list[dict], spread: Spread, *, scale: float = 1.0) 
 
     Returns
     -------
-    dict or None
-        ``value`` (mean of the runs), ``lo``, ``hi``, ``seeds``, ``seconds``, ``sd_run`` (one run's
-        standard deviation on the score scale) and ``quantile``; None without a finished run.
+    Estimate or None
+        None without a finished run.
     """
-    recs = [r for r in recs if r.get("status", "ok") == "ok" and math.isfinite(r.get("value", math.nan))]
-    if not recs:
+    runs = [r for r in runs if r.status == "ok" and math.isfinite(r.value)]
+    if not runs:
         return None
-    vals = np.array([r["value"] for r in recs], dtype=float)
+    vals = np.array([r.value for r in runs], dtype=float)
     k = len(vals)
-    within = [w for w in (_within_sd(req, r) for r in recs) if math.isfinite(w)]
+    within = [w for w in (within_sd(req, r) for r in runs) if math.isfinite(w)]
     var_within = float(np.mean(np.square(within))) if within else 0.0
     var_pooled = spread.var * scale if math.isfinite(spread.var) else math.nan
     if math.isfinite(var_pooled) and var_pooled >= var_within:
@@ -153,14 +204,14 @@ def seed_interval(req, recs: list[dict], spread: Spread, *, scale: float = 1.0) 
 
         var_run, q = var_pooled, float(student.ppf(0.975, max(spread.dof, 1)))
     else:
-        var_run, q = var_within, _Z
+        var_run, q = var_within, Z95
     centre = metric_to_score(req, float(vals.mean()))
     half = q * math.sqrt(var_run / k)
     lo, hi = score_to_metric(req, centre - half), score_to_metric(req, centre + half)
     # an accuracy at the score's clip (0.001 or 0.999, e.g. every seed 100 %) keeps its mean inside its interval
-    lo, hi = min(lo, float(vals.mean())), max(hi, float(vals.mean()))
-    return {"value": float(vals.mean()), "lo": float(lo), "hi": float(hi), "seeds": k,
-            "seconds": float(sum(r.get("seconds", 0.0) for r in recs)), "sd_run": math.sqrt(var_run), "quantile": q}
+    lo, hi = float(min(lo, float(vals.mean()))), float(max(hi, float(vals.mean())))
+    return Estimate(float(vals.mean()), lo, hi, verdict(req, lo, hi), k, float(sum(r.seconds for r in runs)),
+                    math.sqrt(var_run), q)
 
 
 def rank_correlation(x, y) -> float:
