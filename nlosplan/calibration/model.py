@@ -68,7 +68,7 @@ PARAMS: tuple[Param, ...] = (
     Param("pulse_fwhm_ps", "ps", 1.0, 2000.0, log=True),
     Param("bin_width_ps", "ps", 50.0, 200.0),
     Param("start_offset_ps", "ps", -3000.0, 1000.0),
-    Param("noise_per_bin", "counts/bin", 1e-3, 1e6, log=True),
+    Param("floor_counts", "counts/bin", 1e-3, 1e6, log=True),
     Param("crosstalk", "photons/iteration", 1e-7, 10.0, log=True),
 )
 PARAM_NAMES = tuple(p.name for p in PARAMS)
@@ -77,7 +77,7 @@ PARAM_NAMES = tuple(p.name for p in PARAMS)
 STEPS: dict[str, tuple[str, ...]] = {
     "scale": ("photon_scale",),
     "pulse": ("pulse_fwhm_ps", "bin_width_ps", "start_offset_ps"),
-    "noise": ("noise_per_bin", "crosstalk"),
+    "noise": ("floor_counts", "crosstalk"),
 }
 
 

@@ -33,7 +33,7 @@ from nlosplan.calibration.tmf882x_fit import DistanceCaptures, load_distance_cap
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig, resolve_sensor
 from nlosplan.simulators import WallScene, wall_arrivals
-from nlosplan.simulators.fast.fidelity import resolve_fidelity
+from nlosplan.simulators import resolve_fidelity
 
 __all__ = ["Calibration", "calibrate_denali", "calibrate_plane", "load_denali", "load_plane", "plane_arrivals"]
 

@@ -88,7 +88,7 @@ def run_zones(args, t0: float) -> int:
     note(args, f"calibrating {base.name} on {captures.distance_m.size} captures, zones {zones}, terms {terms} ...")
     fit = fit_plane_zones(captures, arrivals, base, zones=zones, terms=terms, min_distance_m=min_d)
     idx = np.flatnonzero(captures.distance_m >= min_d)
-    sensor = zone_sensor(base, fit, floor_per_bin=float(np.median(captures.hists[idx][..., :8])))
+    sensor = zone_sensor(base, fit, floor_counts=float(np.median(captures.hists[idx][..., :8])))
     cv = None
     if args.folds:
         note(args, f"cross-validating by distance: {args.folds} folds ...")

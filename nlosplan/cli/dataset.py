@@ -64,7 +64,7 @@ def _choices(allowed: tuple[str, ...]):
 
 
 def _fidelity(text: str) -> str:
-    from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS
+    from nlosplan.simulators import FIDELITY_LEVELS
 
     if text not in FIDELITY_LEVELS:
         raise argparse.ArgumentTypeError(f"unknown fidelity {text!r}; allowed: {', '.join(FIDELITY_LEVELS)}")

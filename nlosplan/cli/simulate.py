@@ -11,6 +11,7 @@ from nlosplan.cli.common import emit, int_type, note, number_type, seed_type, su
 from nlosplan.errors import UserError
 from nlosplan.files import writing
 from nlosplan.sensor_models.config import MAX_BINS
+from nlosplan.simulators import BACKENDS
 
 SCENES = ("denali", "corner", "wall")
 DEFAULT_OUT = "nlosplan-out/simulate"
@@ -518,7 +519,7 @@ def add(sub) -> None:
     add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A",
         help="Lambertian base of a retroreflective object, 0..1, with object albedo + diffuse albedo <= 1 "
              "(default: the sensor's scene model, 0.2 for denali-tmf8828-*; else 0)")
-    add("--backend", choices=["fast", "mitsuba"],
+    add("--backend", choices=list(BACKENDS),
         help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
              "cuda_ad_rgb; e.g. --backend mitsuba --fidelity low takes ~10 s on 2 cores)")
     add("--fidelity", metavar="LEVEL",

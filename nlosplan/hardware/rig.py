@@ -196,7 +196,7 @@ class SceneHistograms:
     def __call__(self, zones: str, range_mode: str):
         import numpy as np
 
-        from nlosplan.simulators import FastSimulator
+        from nlosplan.simulators import expected_batch
 
         sensor = sensor_preset(zones, range_mode)
         x, y = self.position()
@@ -213,7 +213,7 @@ class SceneHistograms:
                     self._anchors[akey] = [self._scene(ax, ay, lights, sensor) for ax in (x0, x1) for ay in (y0, y1)]
                 anchors = self._anchors[akey]
             scenes = [self._scene(x, y, lights, sensor), *anchors]
-            hit = np.asarray(FastSimulator(scenes, sensor, fidelity=self.fidelity).expected())[0]
+            hit = np.asarray(expected_batch(scenes, sensor, fidelity=self.fidelity).expected)[0]
             self.computed += 1
             with self._lock:
                 if len(self._cache) >= self._max:

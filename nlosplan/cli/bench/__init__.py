@@ -15,7 +15,7 @@ from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, r
 from nlosplan.cli.dataset import _choices, _objects
 from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
-from nlosplan.simulators.fast.bench import (
+from nlosplan.simulators.bench import (
     DEFAULT_LEVELS,
     DEFAULT_OBJECTS,
     DEFAULT_PLOT,

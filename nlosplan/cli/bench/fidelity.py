@@ -31,7 +31,7 @@ minutes per model for 60 cases on 2 cores. JSON: {"cases": [{"model",
 
 def _cmd_fidelity(args) -> int:
     from nlosplan.files import check_plot_path
-    from nlosplan.simulators.mitsuba.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
+    from nlosplan.simulators.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
 
     if args.plot:
         check_plot_path(args.plot, "--plot")
@@ -55,9 +55,7 @@ def _cmd_fidelity(args) -> int:
 
 
 def _cmd_crossval(args) -> int:
-    from nlosplan.simulators.mitsuba.crossval import cross_validate, format_table
-
-    from nlosplan.simulators.mitsuba.crossval import check_models
+    from nlosplan.simulators.bench import check_models, cross_validate, format_table
 
     models = check_models(m.strip() for m in args.models.split(",") if m.strip())
     objects, sizes = args.objects, args.sizes
