@@ -61,7 +61,7 @@ JSON: {"cheapest": [{"requirement", "verdict", "design", "value", "lo", "hi",
 "report": PATH}."""
 
 
-def _requirement(text: str):
+def requirement_type(text: str):
     from nlosplan.planner.design.requirements import parse_requirement
 
     try:
@@ -187,7 +187,7 @@ def add(sub) -> None:
                         "minutes")
     p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
                                                      "(see nlosplan/planner/design/config.py for the tables)")
-    p.add_argument("--requirement", action="append", type=_requirement, metavar="REQ",
+    p.add_argument("--requirement", action="append", type=requirement_type, metavar="REQ",
                    help="a requirement, repeatable, e.g. loc<=0.03, shape>=0.5, size>=0.9@lights=on "
                         "(replaces the defaults)")
     p.add_argument("--backend", choices=tuple(BACKENDS), default="fast",

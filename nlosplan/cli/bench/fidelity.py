@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from nlosplan.cli.common import emit, int_type, note, progress_bar
-from nlosplan.cli.dataset import _choices, _objects
+from nlosplan.cli.selections import choice_list, object_list
 
 FIDELITY_DESCRIPTION = """\
 Error against run time of both simulators on DENALI 3x3 (Lambertian objects
@@ -93,9 +93,9 @@ def add_bench(bsub) -> None:
                 "nlosplan bench crossval --models lambertian,mixed,mount --objects A,circle,3 --positions 10 --json")
     c.add_argument("--models", default="lambertian,mixed,mount",
                    help="reflectance models, comma-separated: lambertian, mixed, mount (default: %(default)s)")
-    c.add_argument("--objects", type=_objects, default=["A", "circle", "3"], metavar="A,S,...",
+    c.add_argument("--objects", type=object_list, default=["A", "circle", "3"], metavar="A,S,...",
                    help="DENALI objects (default: A,circle,3)")
-    c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
+    c.add_argument("--sizes", type=choice_list(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
                    help="sizes (default: 4in,8in)")
     c.add_argument("--positions", type=int_type(1, 100), default=10,
                    help="gantry positions, evenly spaced over 0..99 (default: %(default)s)")
