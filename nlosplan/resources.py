@@ -15,7 +15,8 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_DESIGN_SEED", "MAX_SEED", "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
+__all__ = ["MAX_DESIGN_SEED", "MAX_SEED",
+           "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
            "format_bytes", "keep_freed_memory"]
 
 #: Largest seed every random generator of the project takes (numpy, JAX, torch): seeds are 0..2**32-1.

@@ -137,7 +137,8 @@ def test_mount_shared_across_objects_gives_the_unshared_jacobian(monkeypatch):
     nuis = ("photon_scale", "albedo")
     theta = [0.001, -0.002, 0.05, 0.1]
     lam, jac, *_ = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
-    assert FastSimulator(scenes, SENSOR, fidelity=FID).shared_terms() is not None  # the mount and its plate: 2 poses under 4 scenes
+    # the mount and its plate: 2 poses under 4 scenes
+    assert FastSimulator(scenes, SENSOR, fidelity=FID).shared_terms() is not None
     monkeypatch.setattr(FastSimulator, "shared_terms", lambda self: None)
     own, own_jac, *_ = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
     np.testing.assert_allclose(lam, own, rtol=1e-12, atol=1e-9)

@@ -333,6 +333,6 @@ def zone_sensor(base: SensorConfig, fit: ZoneFit, *, floor_counts: float | None 
         changes["pulse_tail_fraction"] = 0.0
     changes["time_walk_ps"] = v["time_walk_ps"] if "walk" in fit.terms else 0.0
     if floor_counts is not None:
-        changes["ambient_rate_hz"] = max(rate_hz(floor_counts, changes["iterations"], v["bin_width_ps"]) - base.dark_rate_hz,
-                                         0.0)
+        rate = rate_hz(floor_counts, changes["iterations"], v["bin_width_ps"])
+        changes["ambient_rate_hz"] = max(rate - base.dark_rate_hz, 0.0)
     return base.replace(name=f"{base.name}-calibrated", **changes)

@@ -67,7 +67,9 @@ def _draw_batch(keys, means, repeats: int, noise: CaptureNoise):
 
 
 def draw_captures(means: np.ndarray, seeds: Sequence[int], repeats: int, sensor: SensorConfig) -> np.ndarray:
-    """Captures of a batch of scenes, each from its own seed (the sensor's :class:`~nlosplan.sensor_models.noise.CaptureNoise`).
+    """Captures of a batch of scenes, each from its own seed.
+
+    Drawn by the sensor's :class:`~nlosplan.sensor_models.noise.CaptureNoise`.
 
     Parameters
     ----------

@@ -204,7 +204,7 @@ class SensorConfig:
 
     @property
     def impulse_sigma_ps(self) -> float:
-        """Standard deviation of the Gaussian part of the impulse response, ps (:func:`~nlosplan.sensor_models.impulse.impulse_sigma_ps`).
+        """Standard deviation of the Gaussian part of the impulse response, ps (:func:`.impulse.impulse_sigma_ps`).
 
         ``sqrt(sigma_pulse**2 + sigma_jitter**2)`` with sigma = FWHM / 2.3548.
         """

@@ -137,7 +137,8 @@ def merge_bins(h: np.ndarray, factor: int, n_bins: int) -> np.ndarray:
     return h.reshape(*h.shape[:-1], n_bins, factor).sum(axis=-1)
 
 
-def jitter_kernel(extra_jitter_fwhm_ps: float, bin_width_ps: float, *, cutoff_sigmas: float = 5.0) -> tuple[np.ndarray, int]:
+def jitter_kernel(extra_jitter_fwhm_ps: float, bin_width_ps: float, *,
+                  cutoff_sigmas: float = 5.0) -> tuple[np.ndarray, int]:
     """Probabilities that a count moves by ``k`` bins under Gaussian jitter.
 
     A count uniform within its bin, displaced by a Gaussian of FWHM

@@ -281,7 +281,7 @@ def _expected(sensor: SensorConfig, t, w, lights_on: bool, crosstalk, crosstalk_
 
 
 def sample_histogram(key, sensor: SensorConfig, times_ps, weights, *, lights_on: bool = True, repeats: int = 1):
-    """Noisy histograms: expected counts, then captures drawn by the sensor's :class:`~nlosplan.sensor_models.noise.CaptureNoise`.
+    """Noisy histograms: expected counts, then captures drawn by the sensor's noise model (:class:`.noise.CaptureNoise`).
 
     Parameters
     ----------

@@ -264,7 +264,8 @@ def counts_and_jacobian(scenes, sensor: SensorConfig, *, backend: str = "fast", 
         progress=progress)
 
 
-def direct_arrivals(scene: Scene, sensor: SensorConfig, *, fidelity="default") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def direct_arrivals(scene: Scene, sensor: SensorConfig, *,
+                    fidelity="default") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """First-bounce arrivals of the scene's relay wall and planes (the table) in each zone.
 
     Parameters

@@ -166,7 +166,8 @@ def _draw_plan(rng, class_of, n_pos, draws):
 
 
 def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bool = False, rule: str = "marginal",
-                      same_group=None, noise: bool = True, capture_noise: CaptureNoise | None = None, confidence: float = 0.95,
+                      same_group=None, noise: bool = True, capture_noise: CaptureNoise | None = None,
+                      confidence: float = 0.95,
                       ci_method: str = "wilson", class_names=None, chunk_bytes: int = 1 << 27,
                       precision: str = "float32", stop_at=None, looks: int = 4, stop_confidence: float = 0.999,
                       progress=None) -> dict:
