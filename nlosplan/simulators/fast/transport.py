@@ -347,8 +347,9 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False, shar
             obj = sp["photon_scale"] * to_bins(static, terms, zone_nodes(
                 static, arrays, _scene_nodes(static, arrays, scene_p, bw, t0, shared), bw, t0))
     lam = direct + obj + xt
+    # a pruned term is a Python 0.0 (folded when traced, no array operation)
     rate = floor_rate_hz(sp["dark_rate_hz"] if static.dark else 0.0, sp["ambient_rate_hz"] if static.ambient else 0.0,
-                         jnp.asarray(scene_p["lights"], dtype))
+                         jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
     floor = per_bin(jnp.asarray(rate, dtype), bw)
     dead = None if static.dead_time_ps is None else static.dead_time_ps / bw
     counts = counts_from_rates(lam, iterations=sp["iterations"], floor_per_bin=floor, pileup=static.pileup,
