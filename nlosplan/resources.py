@@ -15,11 +15,16 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_SEED", "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
+__all__ = ["MAX_DESIGN_SEED", "MAX_SEED",
+           "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
            "format_bytes", "keep_freed_memory"]
 
 #: Largest seed every random generator of the project takes (numpy, JAX, torch): seeds are 0..2**32-1.
 MAX_SEED = 2**32 - 1
+#: Largest seed of a design run (``nlosplan design --seed``, ``[search] seed``): its evaluation seeds are
+#: ``seed * 1000 + i`` (``planner.design.search_config.SEED_STRIDE``) and must stay within :data:`MAX_SEED`,
+#: scikit-learn's limit on a split's ``random_state``.
+MAX_DESIGN_SEED = 1_000_000
 
 _GIB = 1024**3
 

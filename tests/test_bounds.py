@@ -10,11 +10,11 @@ from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import preset
 from nlosplan.simulators import FastSimulator, corner_scene, denali_scene
+from nlosplan.simulators.fast import jacobian
+from nlosplan.simulators.fast.jacobian import _slopes
 from nlosplan.simulators.fast.simulator import to_jax
 from nlosplan.simulators.fast.transport import forward
-from nlosplan.tasks import bounds
 from nlosplan.tasks.bounds import (
-    _slopes,
     analyse_fisher,
     counts_and_jacobian,
     localization_crlb,
@@ -99,7 +99,8 @@ def test_jacobian_matches_finite_differences(lights_on):
 
 def test_jacobian_matches_forward_mode_differentiation(lights_on):
     """The central differences (10 nm, 1e-8 in log units) against jax.jacfwd of the forward model (float64)."""
-    lam, jac, names, sim = counts_and_jacobian(lights_on, SENSOR, fidelity=FID, nuisance=ALL)
+    lam, jac, names, _ = counts_and_jacobian(lights_on, SENSOR, fidelity=FID, nuisance=ALL)
+    sim = FastSimulator([lights_on], SENSOR, fidelity=FID, dtype="float64")
     scene_p, sensor_p = sim.params()
     sc = jax.tree_util.tree_map(lambda a: a[0], to_jax(scene_p, jnp.float64))
     sp = jax.tree_util.tree_map(lambda a: a[0], to_jax(sensor_p, jnp.float64))
@@ -121,8 +122,8 @@ def test_jacobian_matches_forward_mode_differentiation(lights_on):
     assert np.all(np.abs(ad).max(axis=(0, 1)) > 0)  # every parameter moves the counts of this lights-on scene
     # a difference of counts lam over a step h carries float64 rounding ~ eps lam / h: far below the Poisson
     # noise sqrt(lam) per unit of the parameter's information
-    rounding = 1e3 * np.finfo(float).eps * lam[0] / bounds.POSITION_STEP_M
-    assert bounds.LOG_STEP == bounds.POSITION_STEP_M
+    rounding = 1e3 * np.finfo(float).eps * lam[0] / jacobian.POSITION_STEP_M
+    assert jacobian.LOG_STEP == jacobian.POSITION_STEP_M
     for i, name in enumerate(names):
         err = np.abs(jac[0, ..., i] - ad[..., i])
         tol = 1e-4 * np.abs(ad[..., i]) + 1e-7 * np.abs(ad[..., i]).max() + rounding
@@ -135,8 +136,9 @@ def test_mount_shared_across_objects_gives_the_unshared_jacobian(monkeypatch):
               for o in ("A", "S") for p in (0, 47)]
     nuis = ("photon_scale", "albedo")
     theta = [0.001, -0.002, 0.05, 0.1]
-    lam, jac, _, sim = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
-    assert sim.shared_terms() is not None  # the mount and its plate: 2 poses under 4 scenes
+    lam, jac, *_ = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
+    # the mount and its plate: 2 poses under 4 scenes
+    assert FastSimulator(scenes, SENSOR, fidelity=FID).shared_terms() is not None
     monkeypatch.setattr(FastSimulator, "shared_terms", lambda self: None)
     own, own_jac, *_ = counts_and_jacobian(scenes, SENSOR, fidelity=FID, nuisance=nuis, theta=theta)
     np.testing.assert_allclose(lam, own, rtol=1e-12, atol=1e-9)

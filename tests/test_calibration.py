@@ -55,12 +55,12 @@ def recovered(simulated):
 def test_recovers_known_parameters_within_their_uncertainties(recovered):
     v, e = recovered.values, recovered.errors
     assert set(recovered.fitted) == {"photon_scale", "pulse_fwhm_ps", "bin_width_ps", "start_offset_ps",
-                                     "noise_per_bin", "crosstalk"}
+                                     "floor_counts", "crosstalk"}
     assert v["photon_scale"] == pytest.approx(TRUE["photon_scale"], rel=0.005)
     assert v["pulse_fwhm_ps"] == pytest.approx(TRUE["pulse_fwhm_ps"], rel=0.02)
     assert v["bin_width_ps"] == pytest.approx(TRUE["bin_width_ps"], abs=0.1)
     assert v["start_offset_ps"] == pytest.approx(TRUE["start_offset_ps"], abs=3.0)
-    assert v["noise_per_bin"] == pytest.approx(FLOOR, rel=0.02)
+    assert v["floor_counts"] == pytest.approx(FLOOR, rel=0.02)
     assert v["crosstalk"] == pytest.approx(TRUE["crosstalk"], rel=0.1)
     for name in ("photon_scale", "pulse_fwhm_ps", "bin_width_ps", "start_offset_ps"):
         assert e[name] is not None and e[name] > 0
@@ -72,7 +72,7 @@ def test_recovers_known_parameters_within_their_uncertainties(recovered):
 
 def test_steps_stack_and_scale_alone_only_fits_the_scale(simulated):
     start = {"bin_width_ps": TRUE["bin_width_ps"], "start_offset_ps": TRUE["start_offset_ps"],
-             "pulse_fwhm_ps": TRUE["pulse_fwhm_ps"], "crosstalk": TRUE["crosstalk"], "noise_per_bin": FLOOR}
+             "pulse_fwhm_ps": TRUE["pulse_fwhm_ps"], "crosstalk": TRUE["crosstalk"], "floor_counts": FLOOR}
     fit = fit_sensor_model(simulated, steps=["scale"], start=start)
     assert fit.fitted == ["photon_scale"]
     assert fit.values["bin_width_ps"] == TRUE["bin_width_ps"]
@@ -86,7 +86,7 @@ def test_calibrated_sensor_round_trips_and_reproduces_the_data(recovered, simula
     s.save(path)
     loaded = load_sensor_file(path)
     assert loaded.bin_width_ps == pytest.approx(recovered.values["bin_width_ps"])
-    assert loaded.dark_rate_hz * ITERS * loaded.bin_width_ps * 1e-12 == pytest.approx(recovered.values["noise_per_bin"])
+    assert loaded.dark_rate_hz * ITERS * loaded.bin_width_ps * 1e-12 == pytest.approx(recovered.values["floor_counts"])
     mu = np.asarray(expected_histogram(loaded, simulated.times_ps[5], simulated.weights[5], lights_on=False))
     truth = np.asarray(expected_histogram(_sensor(), simulated.times_ps[5], simulated.weights[5], lights_on=False))
     assert np.abs(mu - truth).sum() / truth.sum() < 0.02

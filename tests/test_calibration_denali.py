@@ -133,7 +133,7 @@ def test_recovers_known_parameters(cli_run):
 
 def test_quiet_floors_are_the_true_floors_despite_the_objects_late_return(capture_set, captures):
     lights = captures.labels["lights"].to_numpy()
-    values = {**TRUE, "noise_per_bin": 0.0}
+    values = {**TRUE, "floor_counts": 0.0}
     floors = quiet_floors(capture_set, values, groups=captures.floor_groups())
     assert sorted(set(captures.floor_groups())) == ["A_8in off", "NOOBJECT_8in on"]
     assert floors[lights == "off"] == pytest.approx(DARK, rel=0.03)  # one floor per folder and zone

@@ -23,7 +23,7 @@ def synthetic_space(n: int = 5, repeats: int = 3, step: float = 80.0) -> Candida
     c = len(pts)
     direct = np.zeros((c, 2, BINS))
     direct[:, :, 2] = 5000.0
-    background = np.full((c, 2, BINS), 2.0)
+    floor = np.full((c, 2, BINS), 2.0)
     obj = np.zeros((c, 2, BINS))
     jac = np.zeros((c, 2, BINS, 2))
     for i, (x, y) in enumerate(labels):
@@ -35,7 +35,7 @@ def synthetic_space(n: int = 5, repeats: int = 3, step: float = 80.0) -> Candida
         jac[i, :, :, 0] = share[:, None] * dpulse[None] * 40.0 + np.array([1.0, -1.0])[:, None] * pulse[None]
         jac[i, :, :, 1] = share[:, None] * dpulse[None] * 20.0
     return CandidateSpace(points_mm=pts, labels_xy=labels, direct=direct.reshape(c, -1), object=obj.reshape(c, -1),
-                          background=background.reshape(c, -1), jac_xy=jac.reshape(c, 2 * BINS, 2),
+                          floor=floor.reshape(c, -1), jac_xy=jac.reshape(c, 2 * BINS, 2),
                           shape=(1, 2, BINS), repeats=repeats, meta={"synthetic": True})
 
 

@@ -57,10 +57,11 @@ def test_bad_worlds_and_search_tables_exit_2_naming_the_key(capsys, tmp_path, to
 
 
 def test_seed_limit_of_the_cli_is_the_search_s():
-    from nlosplan.cli.design import MAX_SEED
+    from nlosplan.cli.design import MAX_DESIGN_SEED
     from nlosplan.planner.design.search import MAX_SEED as SEARCH_MAX
+    from nlosplan.resources import MAX_DESIGN_SEED as DEFINED
 
-    assert MAX_SEED == SEARCH_MAX
+    assert MAX_DESIGN_SEED is DEFINED and SEARCH_MAX is DEFINED
 
 
 def test_the_largest_seed_gives_evaluation_seeds_the_split_and_training_accept():

@@ -282,7 +282,7 @@ def test_derived_quantities():
     np.testing.assert_allclose(cfg.bin_edges_ps(), -100.0 + 50.0 * np.arange(11), rtol=0, atol=0)
     assert cfg.bin_edges_ps().dtype == np.float64
     assert cfg.window_ps == 500.0
-    assert cfg.sigma_ps == pytest.approx(500.0 / 2.3548200450309493, rel=1e-15)
+    assert cfg.impulse_sigma_ps == pytest.approx(500.0 / 2.3548200450309493, rel=1e-15)
     assert cfg.max_count == 2**24 - 1
 
 

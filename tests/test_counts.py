@@ -1,4 +1,4 @@
-"""Pile-up, its correction, Poisson sampling and 24-bit saturation."""
+"""Pile-up and its correction (drawing captures: tests/test_noise.py)."""
 
 from __future__ import annotations
 
@@ -6,13 +6,10 @@ import numpy as np
 import pytest
 
 from nlosplan._jax import jax, jnp
-from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.sensor_models import counts as C
-from nlosplan.sensor_models.pipeline import sample_counts
 
 pileup_expected = jax.jit(C.pileup_expected)
 coates_correction = jax.jit(C.coates_correction)
-sample_poisson = jax.jit(C.sample_poisson)
 
 
 # ------------------------------------------------------------------- pile-up
@@ -137,73 +134,3 @@ def test_coates_is_identity_to_first_order_at_low_counts():
     c = np.array([1.0, 2.0, 3.0])
     n = 1e9
     np.testing.assert_allclose(np.asarray(coates_correction(c, n)), c / n, rtol=1e-8)
-
-
-# ------------------------------------------------------------------ sampling
-_N_SAMPLES = 100_000
-
-
-@pytest.mark.parametrize("mean", [3.0, 1e3, 1e9, 1e12])
-def test_sample_poisson_mean_and_variance(mean):
-    x = sample_poisson(jax.random.key(11), jnp.full((_N_SAMPLES,), mean))
-    assert x.dtype == jnp.int64
-    x = np.asarray(x)
-    assert np.all(x >= 0)
-    if mean > C.EXACT_POISSON_MAX_MEAN:
-        # normal path: no overflow, values near the mean
-        assert np.all(np.abs(x - mean) < 10 * np.sqrt(mean))
-    m = x.astype(np.float64).mean()
-    v = x.astype(np.float64).var(ddof=1)
-    se_mean = np.sqrt(mean / _N_SAMPLES)
-    se_var = np.sqrt((2 * mean**2 + mean) / _N_SAMPLES)
-    assert abs(m - mean) < 5 * se_mean, (m, mean)
-    assert abs(v - mean) < 5 * se_var, (v, mean)
-
-
-def test_sample_poisson_small_mean_distribution():
-    """Exact path: empirical pmf at mean 3 matches the Poisson pmf."""
-    from scipy.stats import poisson
-
-    x = np.asarray(sample_poisson(jax.random.key(3), jnp.full((_N_SAMPLES,), 3.0)))
-    freq = np.bincount(x, minlength=12)[:12] / _N_SAMPLES
-    pmf = poisson.pmf(np.arange(12), 3.0)
-    assert np.all(np.abs(freq - pmf) < 5 * np.sqrt(pmf * (1 - pmf) / _N_SAMPLES) + 1e-4)
-
-
-def test_sample_poisson_zero_mean_is_zero_and_mixed_means():
-    means = jnp.asarray([0.0, 0.0, 5.0, 1e12, 0.0, 4e18])
-    x = np.asarray(C.sample_poisson(jax.random.key(0), means))
-    assert x.dtype == np.int64
-    assert x[0] == 0 and x[1] == 0 and x[4] == 0
-    assert 0 <= x[2] < 100
-    assert abs(x[3] - 1e12) < 1e8
-    assert 3.9e18 < x[5] <= 9e18  # no int64 overflow
-    np.testing.assert_array_equal(np.asarray(C.sample_poisson(jax.random.key(9), jnp.zeros((3, 4)))), 0)
-
-
-def test_sample_poisson_float32_means_and_determinism():
-    means = jnp.asarray([2.0, 1e9], jnp.float32)
-    a = np.asarray(C.sample_poisson(jax.random.key(1), means))
-    b = np.asarray(C.sample_poisson(jax.random.key(1), means))
-    assert a.dtype == np.int64
-    np.testing.assert_array_equal(a, b)
-    assert abs(a[1] - 1e9) < 10 * np.sqrt(1e9)
-
-
-def test_saturate_clips_at_24_bits():
-    x = jnp.asarray([0, 5, 2**24 - 2, 2**24 - 1, 2**24, 10**12], jnp.int64)
-    got = np.asarray(C.saturate(x))
-    np.testing.assert_array_equal(got, [0, 5, 2**24 - 2, 2**24 - 1, 2**24 - 1, 2**24 - 1])
-    assert MAX_COUNT_24BIT == 2**24 - 1
-    np.testing.assert_array_equal(np.asarray(C.saturate(x, 100)), [0, 5, 100, 100, 100, 100])
-
-
-def test_sample_counts_applies_saturation():
-    mean = jnp.asarray([0.0, 10.0, 1e9, 1e12])
-    sat = np.asarray(sample_counts(jax.random.key(4), mean))
-    assert sat.dtype == np.int64
-    assert sat[0] == 0
-    np.testing.assert_array_equal(sat[2:], MAX_COUNT_24BIT)
-    raw = np.asarray(sample_counts(jax.random.key(4), mean, saturation=False))
-    assert raw[3] > MAX_COUNT_24BIT
-    np.testing.assert_array_equal(sat, np.minimum(raw, MAX_COUNT_24BIT))

@@ -19,7 +19,7 @@ def test_cached_chunks_equal_per_call_slices_with_a_padded_last_chunk(options):
     old = FastSimulator(scenes, sensors=sensors, fidelity="draft", chunk=2, cache_chunks=False)
     a, b = new.expected(parts=True), old.expected(parts=True)
     assert a["counts"].shape == (2, 5, 3, 3, 128)
-    for part in ("counts", "object", "direct", "background"):  # two compilations: float32 rounding apart
+    for part in ("counts", "object", "direct", "floor"):  # two compilations: float32 rounding apart
         assert np.abs(a[part] - b[part]).max() <= 1e-6 * np.abs(b[part]).max(), part
     assert np.abs(a["object"]).max() > 0
     # every scene of a chunk is its own: the scene simulated alone (its own plan: the retroreflector's

@@ -1,4 +1,6 @@
-"""The floors of the house (docs/architecture.md): no import cycle, no import up a floor, no private name across rooms.
+"""The floors of the house (docs/architecture.md): no import cycle, no import up a floor, no private name across rooms,
+and the two seams: the simulators' backends are reached only through their API, captures are drawn only by the noise
+model.
 
 An AST walk over ``nlosplan/`` (no import is executed): every ``import`` and
 ``from ... import`` counts, function-local and ``TYPE_CHECKING`` ones
@@ -6,8 +8,13 @@ included. Rooms are the subpackages of ``nlosplan``, lowest first as in
 :data:`ROOMS`; a few shared modules sit below every room (:data:`SHARED`). A
 room may import its own modules, the shared ones and the rooms below it; an
 import up a floor is allowed only through a documented plugin hook
-(:data:`PLUGIN_HOOKS`, empty today). The checker is tested on planted
-violations in a temporary tree, so it can fail.
+(:data:`PLUGIN_HOOKS`, empty today). Outside ``simulators/`` no module imports
+a backend's modules (:data:`BACKEND_PACKAGES`) or its simulator classes
+(:data:`BACKEND_CLASSES`): they go through :mod:`nlosplan.simulators.api`
+(the stability registry excepted, :data:`BACKEND_IMPORTERS`). A Poisson draw
+(a call of ``.poisson(``) appears only in the noise model
+(:data:`NOISE_MODULE`) and the benchmarks (modules named ``bench``). The
+checker is tested on planted violations in a temporary tree, so it can fail.
 """
 
 from __future__ import annotations
@@ -27,6 +34,14 @@ ROOMS = ("sensor_models", "denali", "simulators", "stability", "data", "calibrat
          "experiments", "reports", "cli")
 #: (importing module, imported module) pairs allowed to go up a floor: documented plugin hooks. None today.
 PLUGIN_HOOKS: frozenset[tuple[str, str]] = frozenset()
+#: The backends' packages: only ``simulators/`` imports them (the rest goes through ``nlosplan.simulators``).
+BACKEND_PACKAGES = ("nlosplan.simulators.fast", "nlosplan.simulators.mitsuba")
+#: Backend classes the simulators' face exports for users and tests, not for the rooms above.
+BACKEND_CLASSES = ("FastSimulator", "FastBackend", "TwinSimulator", "TwinBackend")
+#: Modules outside ``simulators/`` allowed to import a backend's module: the stability registry lists every room's cases.
+BACKEND_IMPORTERS = frozenset({"nlosplan.stability"})
+#: The one module that draws captures (Poisson noise and the clip).
+NOISE_MODULE = "nlosplan.sensor_models.noise"
 
 
 def modules(root: Path) -> dict[str, Path]:
@@ -129,8 +144,37 @@ def cycles(mods: dict[str, Path], edges) -> list[list[str]]:
     return out
 
 
+def poisson_calls(mods: dict[str, Path]) -> list[tuple[str, int]]:
+    """``(module, line)`` of every call of an attribute named ``poisson`` (``rng.poisson(...)``, ``jax.random.poisson``)."""
+    found = []
+    for name, path in mods.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "poisson":
+                found.append((name, node.lineno))
+    return found
+
+
+def seam_violations(root: Path, mods: dict[str, Path], edges) -> dict[str, list[str]]:
+    """The two seams: ``backend`` (a backend reached past the simulators' API) and ``poisson`` (a draw outside the noise model)."""
+    out: dict[str, list[str]] = {"backend": [], "poisson": []}
+    for src, target, attr, line in edges:
+        if room(src) == "simulators" or src in BACKEND_IMPORTERS:
+            continue
+        where = f"{mods[src].relative_to(root.parent)}:{line}"
+        if any(target == p or target.startswith(p + ".") for p in BACKEND_PACKAGES):
+            out["backend"].append(f"{where}: {src} imports the backend module {target}")
+        elif attr in BACKEND_CLASSES and room(target) == "simulators":
+            out["backend"].append(f"{where}: {src} imports the backend class {target}.{attr}")
+    for src, line in poisson_calls(mods):
+        if src != NOISE_MODULE and src.rpartition(".")[2] != "bench":
+            out["poisson"].append(f"{mods[src].relative_to(root.parent)}:{line}: {src} draws Poisson counts "
+                                  f"(use {NOISE_MODULE}.CaptureNoise)")
+    return out
+
+
 def violations(root: Path) -> dict[str, list[str]]:
-    """Everything that breaks a floor, by rule: ``unknown room``, ``cycle``, ``upward``, ``private``."""
+    """Everything that breaks a floor or a seam, by rule: ``unknown room``, ``cycle``, ``upward``, ``private``,
+    ``backend``, ``poisson``."""
     mods = modules(root)
     edges = imports(mods)
     out: dict[str, list[str]] = {"unknown room": [], "cycle": [], "upward": [], "private": []}
@@ -149,12 +193,16 @@ def violations(root: Path) -> dict[str, list[str]]:
         private_module = any(p.startswith("_") and not p.startswith("__") for p in target.split(".")[1:])
         if (attr and attr.startswith("_") and not attr.startswith("__")) or (private_module and target not in SHARED):
             out["private"].append(f"{where}: {src} ({room(src)}) uses private {target}{'.' + attr if attr else ''}")
+    out.update(seam_violations(root, mods, edges))
     return out
+
+
+CLEAN = {"unknown room": [], "cycle": [], "upward": [], "private": [], "backend": [], "poisson": []}
 
 
 def test_nlosplan_keeps_its_floors():
     found = violations(PACKAGE)
-    assert found == {"unknown room": [], "cycle": [], "upward": [], "private": []}, found
+    assert found == CLEAN, found
 
 
 def test_every_room_is_a_subpackage_with_a_face():
@@ -185,7 +233,7 @@ def test_the_checker_passes_a_clean_tree(tmp_path):
         "simulators/scene.py": "import nlosplan.errors\n",
         "cli/main.py": "def f():\n    from nlosplan.simulators.api import UserError\n",
     })
-    assert violations(pkg) == {"unknown room": [], "cycle": [], "upward": [], "private": []}
+    assert violations(pkg) == CLEAN
 
 
 def test_the_checker_catches_planted_violations(tmp_path):
@@ -213,6 +261,40 @@ def test_the_checker_catches_planted_violations(tmp_path):
     assert any("nlosplan.simulators._hidden" in v for v in found["private"])
     assert found["unknown room"] == ["nlosplan.attic (room 'attic' is not in ROOMS)",
                                      "nlosplan.attic.old (room 'attic' is not in ROOMS)"]
+
+
+def test_the_checker_catches_a_backend_reached_past_the_api(tmp_path):
+    pkg = _write(tmp_path, {
+        "simulators/api.py": "from nlosplan.simulators.fast.simulator import FastSimulator\n",  # inside: fine
+        "simulators/fast/simulator.py": "class FastSimulator:\n    pass\n",
+        "simulators/mitsuba/render.py": "",
+        "stability.py": "from nlosplan.simulators.fast import simulator\n",  # the registry: allowed
+        "tasks/bounds.py": "from nlosplan.simulators.fast.simulator import FastSimulator\n",
+        "planner/data.py": "def f():\n    from nlosplan.simulators import FastSimulator, expected_batch\n",
+        "cli/bench.py": "import nlosplan.simulators.mitsuba.render\n",
+        "data/build.py": "from nlosplan.simulators import api\n",  # the seam: fine
+    })
+    found = violations(pkg)
+    assert len(found["backend"]) == 3, found["backend"]
+    assert any("nlosplan.tasks.bounds imports the backend module nlosplan.simulators.fast.simulator" in v
+               for v in found["backend"])
+    assert any("nlosplan.planner.data imports the backend class nlosplan.simulators.FastSimulator" in v
+               for v in found["backend"])
+    assert any("nlosplan.cli.bench imports the backend module nlosplan.simulators.mitsuba.render" in v
+               for v in found["backend"])
+    assert {k: v for k, v in found.items() if k != "backend"} == {k: v for k, v in CLEAN.items() if k != "backend"}
+
+
+def test_the_checker_catches_a_poisson_draw_outside_the_noise_model(tmp_path):
+    pkg = _write(tmp_path, {
+        "sensor_models/noise.py": "def draw(rng, m):\n    return rng.poisson(m)\n",  # the noise model: fine
+        "sensor_models/bench.py": "def f(rng):\n    return rng.poisson(3.0)\n",  # a benchmark: fine
+        "planner/simrig.py": "def observe(rng, lam):\n    return rng.poisson(lam).mean(0)\n",
+        "hardware/emu.py": "import jax\n\ndef f(k, m):\n    return jax.random.poisson(k, m)\n",
+    })
+    found = violations(pkg)
+    assert sorted(v.split(":")[0] for v in found["poisson"]) == ["nlosplan/hardware/emu.py", "nlosplan/planner/simrig.py"]
+    assert "nlosplan.planner.simrig draws Poisson counts" in " ".join(found["poisson"])
 
 
 def test_a_plugin_hook_must_be_listed(tmp_path, monkeypatch):

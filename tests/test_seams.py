@@ -125,7 +125,7 @@ def test_sensor_sigma_is_the_impulse_sigma():
     from nlosplan.sensor_models import preset
 
     s = preset("tmf8828-3x3-short").replace(pulse_fwhm_ps=120.0, jitter_fwhm_ps=90.0)
-    assert s.sigma_ps == impulse_sigma_ps(120.0, 90.0) == 150.0 / 2.3548200450309493
+    assert s.impulse_sigma_ps == impulse_sigma_ps(120.0, 90.0) == 150.0 / 2.3548200450309493
 
 
 def test_capture_planner_localizer_scores_with_denalis_loc_rmse():

@@ -37,7 +37,7 @@ def _fake_near_wall(growth):
     for j, h in enumerate(sc.HEIGHTS):
         obj[:, j, :, 0] = growth(h)
     direct = np.full_like(obj, 1e9)
-    return {"object": obj, "direct": direct, "counts": obj + direct, "background": np.zeros_like(obj),
+    return {"object": obj, "direct": direct, "counts": obj + direct, "floor": np.zeros_like(obj),
             "crosstalk": np.zeros_like(obj)}
 
 
@@ -79,7 +79,7 @@ def test_dynamic_range_check_rejects_a_float32_error():
     rng = np.random.default_rng(1)
     obj = rng.uniform(1.0, 10.0, (9, 128))
     zero = np.zeros_like(obj)
-    o64 = {"object": obj, "counts": obj + 1e6, "direct": np.full_like(obj, 1e6), "background": zero}
+    o64 = {"object": obj, "counts": obj + 1e6, "direct": np.full_like(obj, 1e6), "floor": zero}
     assert sc.dynamic_range_check(o64, dict(o64))[0]
     ok, detail = sc.dynamic_range_check(o64, {**o64, "object": obj * (1 + 1e-2)})
     assert not ok and "object 1.0e-02" in detail

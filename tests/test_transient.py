@@ -16,7 +16,7 @@ from nlosplan.sensor_models.transient import (
 
 
 def _matrix(grid, s, dtype=np.float64):
-    return irf_matrix(grid, bin_width_ps=jnp.asarray(s.bin_width_ps, dtype), sigma_ps=jnp.asarray(s.sigma_ps, dtype),
+    return irf_matrix(grid, bin_width_ps=jnp.asarray(s.bin_width_ps, dtype), sigma_ps=jnp.asarray(s.impulse_sigma_ps, dtype),
                       pulse=pulse_boxes(s), extent_ps=irf_extent_ps(s), nominal_bin_width_ps=s.bin_width_ps)
 
 
@@ -57,7 +57,7 @@ def test_node_matrix_equals_exact_binning_of_node_impulses(sensor, jitter):
     w = np.array([1e7, 3.0, 10.0, 2.0])
     nodes = deposit(grid, nt[idx], w, None, 1, bin_width_ps=s.bin_width_ps, start_offset_ps=s.start_offset_ps)
     h = np.asarray(nodes @ _matrix(grid, s))[0]
-    ref = np.asarray(bin_arrivals(nt[idx], w, s.bin_edges_ps(), s.sigma_ps, pulse_boxes(s)))
+    ref = np.asarray(bin_arrivals(nt[idx], w, s.bin_edges_ps(), s.impulse_sigma_ps, pulse_boxes(s)))
     big = ref > 1e-10 * ref.max()  # below, both are rounding-level (< 1e-13 absolute)
     np.testing.assert_allclose(h, ref, rtol=0, atol=1e-12 * ref.max())
     np.testing.assert_allclose(h[big], ref[big], rtol=1e-9)

@@ -23,7 +23,7 @@ from nlosplan.calibration.fit import (
     _deviance_fn,
     _minimize,
     _theta_of_z,
-    floor_counts,
+    measured_floor_counts,
 )
 from nlosplan.calibration.model import PARAM_NAMES, CaptureSet, make_model
 
@@ -97,7 +97,7 @@ def bootstrap_errors(captures: CaptureSet, fit: CalibrationFit, *, resamples: in
         raise UserError(f"bootstrap needs at least 2 captures with usable zones; this fit has {usable.size}")
     model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps, fit.values["bin_width_ps"],
                        fit.values["start_offset_ps"])
-    floor = floor_counts(captures, noise)
+    floor = measured_floor_counts(captures, noise)
     free = np.array([name in fit.fitted for name in PARAM_NAMES])
     theta0 = fit.theta()
     dev = _deviance_fn(model, captures.counts, np.broadcast_to(fit.used[..., None], captures.counts.shape), floor)

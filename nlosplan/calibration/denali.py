@@ -99,7 +99,7 @@ def _scan_offset(cs: CaptureSet, used: np.ndarray, start: dict, shape, step, t0,
     thetas[:, PARAM_NAMES.index("start_offset_ps")] = grid
     mu = np.asarray(jax.vmap(model)(jnp.asarray(thetas)), dtype=np.float64)
     if noise == "measured":
-        mu = mu - values["noise_per_bin"] + np.median(sub.counts[..., -FLOOR_BINS:], axis=-1)[..., None]
+        mu = mu - values["floor_counts"] + np.median(sub.counts[..., -FLOOR_BINS:], axis=-1)[..., None]
     mask = np.broadcast_to(used[rows][..., None], sub.counts.shape)
     dev = [poisson_deviance(m, sub.counts, mask) for m in mu]
     return float(grid[int(np.argmin(dev))])
@@ -135,7 +135,7 @@ def quiet_floors(cs: CaptureSet, values: dict, pulse_shape=None, pulse_step_ps: 
 
     model = make_model(cs, pulse_shape, pulse_step_ps, pulse_t0_ps, values["bin_width_ps"], values["start_offset_ps"])
     fwhm = min(3.0 * values["pulse_fwhm_ps"], PARAMS[PARAM_NAMES.index("pulse_fwhm_ps")].hi)
-    wide = {**values, "noise_per_bin": 0.0, "crosstalk": 0.0, "pulse_fwhm_ps": fwhm}
+    wide = {**values, "floor_counts": 0.0, "crosstalk": 0.0, "pulse_fwhm_ps": fwhm}
     signal = np.asarray(model(jnp.asarray([wide[n] for n in PARAM_NAMES])), dtype=np.float64)
     reach = QUIET_SIGMAS * fwhm / FWHM_PER_SIGMA
     lo, hi = (pulse_t0_ps, pulse_t0_ps + len(pulse_shape) * pulse_step_ps) if pulse_shape is not None else (0.0, 0.0)
@@ -303,7 +303,7 @@ def calibrated_denali_sensor(base: SensorConfig, fit: CalibrationFit, cs: Captur
     lights : sequence of {"on", "off"}, length N
         Room lights of each capture.
     noise : {"measured", "global"}
-        ``global``: the fitted ``noise_per_bin`` (the captures must share one lights setting).
+        ``global``: the fitted ``floor_counts`` (the captures must share one lights setting).
     groups : sequence of length N, optional
         Captures sharing a floor (see :func:`quiet_floors`).
 

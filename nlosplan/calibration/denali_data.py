@@ -21,7 +21,7 @@ vs 37.8 with it in the background; weak evidence). One real
 Its arrivals per zone (:func:`scene_arrivals`) are
 
 - the first-bounce returns of every zone sub-ray off the relay wall and the
-  tables (:func:`~nlosplan.simulators.fast.geometry.direct_returns`):
+  tables (:func:`~nlosplan.simulators.direct_arrivals`):
   ``t = path / c``, weight ``I s dOmega (albedo / pi) cos / r^2``;
 - the object's three-bounce light: the ``object`` part of the fast
   simulator's expected counts for an ideal copy of the sensor (no impulse
@@ -56,9 +56,7 @@ from nlosplan.data.store import CaptureStore
 from nlosplan.denali import DENALI_OBJECTS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import MAX_BINS, SensorConfig
-from nlosplan.simulators.fast.fidelity import resolve_fidelity
-from nlosplan.simulators.fast.geometry import direct_returns
-from nlosplan.simulators.fast.simulator import FastSimulator
+from nlosplan.simulators import direct_arrivals, expected_batch, resolve_fidelity
 from nlosplan.simulators.presets.denali import denali_scene
 
 if TYPE_CHECKING:
@@ -290,7 +288,7 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
     Matches the fast simulator: with these arrivals,
     :func:`~nlosplan.calibration.model.make_model` at a
     sensor's parameters gives its expected counts
-    (``FastSimulator(scene, sensor).expected()``) to well under 1 % where
+    (``expected_histogram(scene, sensor)``) to well under 1 % where
     the wall return shows.
     """
     keys = [(str(o), str(s), int(p)) for o, s, p in keys]
@@ -299,8 +297,7 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
     fid = resolve_fidelity(fidelity)
     opts = dict(scene_options or {})
     rig = matching_scene(*keys[0], **opts)
-    path, w_direct, _ = direct_returns(rig.lidar, (rig.wall, *rig.planes), sensor, fid.zone_sub)  # (Z, S)
-    t_direct = path / C_M_PER_PS
+    t_direct, w_direct, _ = direct_arrivals(rig, sensor, fidelity=fid)  # (Z, S)
     n_zones = sensor.n_zones
     groups: dict[str, list[int]] = {}  # one simulator per object model (meshes may differ inside a batch)
     for m, (o, _, _) in enumerate(keys):
@@ -311,7 +308,7 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
     for members in groups.values():
         scenes = [matching_scene(*keys[m], **opts) for m in members]
         ideal = _ideal_sensor(sensor, _latest_arrival_ps(scenes))
-        light = FastSimulator(scenes, ideal, fidelity=fid).expected(parts=True)["object"]
+        light = expected_batch(scenes, ideal, fidelity=fid, parts=True).parts["object"]
         light = np.asarray(light, dtype=np.float64).reshape(len(scenes), n_zones, -1)
         centres = (np.arange(light.shape[-1]) + 0.5) * ideal.bin_width_ps
         for j, m in enumerate(members):
@@ -334,7 +331,7 @@ def scene_arrivals(keys, sensor: SensorConfig, *, fidelity="default",
 def wall_zones(sensor: SensorConfig, *, fidelity="default", scene_options: dict | None = None) -> list[int]:
     """Flat indices of the zones that see the relay wall (some sub-ray's first hit is on it)."""
     rig = matching_scene("NOOBJECT", "8in", 0, **dict(scene_options or {}))
-    _, w, plane = direct_returns(rig.lidar, (rig.wall, *rig.planes), sensor, resolve_fidelity(fidelity).zone_sub)
+    _, w, plane = direct_arrivals(rig, sensor, fidelity=fidelity)
     return [int(z) for z in np.flatnonzero(np.any((plane == 0) & (w > 0), axis=1))]
 
 

@@ -223,13 +223,13 @@ def initial_values(captures: CaptureSet, used: np.ndarray, timebase=None) -> dic
     scale = float(np.median(net[ok] / (wsum[ok] * captures.iterations)))
     start = {"photon_scale": float(np.clip(scale, 2e-4, 5e3)), "pulse_fwhm_ps": 150.0,
              "bin_width_ps": 95.0, "start_offset_ps": -1100.0,
-             "noise_per_bin": float(np.clip(np.median(floor[used]), 2e-3, 5e5)), "crosstalk": 1e-5}
+             "floor_counts": float(np.clip(np.median(floor[used]), 2e-3, 5e5)), "crosstalk": 1e-5}
     if timebase is not None:
         start.update(bin_width_ps=timebase.bin_width_ps, start_offset_ps=timebase.start_offset_ps)
     return start
 
 
-def floor_counts(captures: CaptureSet, noise) -> np.ndarray | None:
+def measured_floor_counts(captures: CaptureSet, noise) -> np.ndarray | None:
     """The floor per capture zone, shape (N, Z, 1), that ``noise`` asks for; None for one global level.
 
     Parameters
@@ -273,7 +273,7 @@ def fit_sensor_model(captures: CaptureSet, *, steps=("scale", "pulse", "noise"),
     noise : {"global", "measured"} or array of shape (N, Z)
         One noise floor for every capture (fitted by the ``noise`` step) or
         each capture zone's own floor (median of its last 30 bins, or the
-        given floors in counts per bin; not fitted), see :func:`floor_counts`.
+        given floors in counts per bin; not fitted), see :func:`measured_floor_counts`.
     joint : bool
         Refine every selected parameter together after the steps.
     max_evals : int
@@ -293,7 +293,7 @@ def fit_sensor_model(captures: CaptureSet, *, steps=("scale", "pulse", "noise"),
     bad = [s for s in steps if s not in STEPS]
     if bad or not steps:
         raise UserError(f"unknown calibration step(s) {', '.join(bad) or '(none)'}; allowed: {', '.join(STEPS)}")
-    floor = floor_counts(captures, noise)
+    floor = measured_floor_counts(captures, noise)
     used, messages = usable_zones(captures)
     values = initial_values(captures, used)
     for name, v in (start or {}).items():
@@ -309,7 +309,7 @@ def fit_sensor_model(captures: CaptureSet, *, steps=("scale", "pulse", "noise"),
     fitted: list[str] = []
     step_log = []
     for step in steps:
-        names = [n for n in STEPS[step] if not (floor is not None and n == "noise_per_bin")]
+        names = [n for n in STEPS[step] if not (floor is not None and n == "floor_counts")]
         free = np.array([n in names for n in PARAM_NAMES])
         before = float(dev(jnp.asarray(theta)))
         theta, after, n_evals = _minimize(dev, free, theta, max_evals)
@@ -356,9 +356,9 @@ def predict(fit: CalibrationFit, captures: CaptureSet, noise="global") -> np.nda
     model = make_model(captures, fit.pulse_shape, fit.pulse_step_ps, fit.pulse_t0_ps, fit.values["bin_width_ps"],
                        fit.values["start_offset_ps"])
     mu = np.asarray(model(jnp.asarray(fit.theta())), dtype=np.float64)
-    floor = floor_counts(captures, noise)
+    floor = measured_floor_counts(captures, noise)
     if floor is not None:
-        mu = mu - fit.values["noise_per_bin"] + floor
+        mu = mu - fit.values["floor_counts"] + floor
     return mu
 
 

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosplan._jax import jax, jnp
-from nlosplan.constants import FWHM_PER_SIGMA
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.impulse import sigma_of_fwhm
 from nlosplan.sensor_models.pipeline import pulse_boxes
 from nlosplan.sensor_models.transient import TimeGrid, deposit, irf_extent_ps, irf_matrix
 
@@ -68,7 +68,7 @@ PARAMS: tuple[Param, ...] = (
     Param("pulse_fwhm_ps", "ps", 1.0, 2000.0, log=True),
     Param("bin_width_ps", "ps", 50.0, 200.0),
     Param("start_offset_ps", "ps", -3000.0, 1000.0),
-    Param("noise_per_bin", "counts/bin", 1e-3, 1e6, log=True),
+    Param("floor_counts", "counts/bin", 1e-3, 1e6, log=True),
     Param("crosstalk", "photons/iteration", 1e-7, 10.0, log=True),
 )
 PARAM_NAMES = tuple(p.name for p in PARAMS)
@@ -77,7 +77,7 @@ PARAM_NAMES = tuple(p.name for p in PARAMS)
 STEPS: dict[str, tuple[str, ...]] = {
     "scale": ("photon_scale",),
     "pulse": ("pulse_fwhm_ps", "bin_width_ps", "start_offset_ps"),
-    "noise": ("noise_per_bin", "crosstalk"),
+    "noise": ("floor_counts", "crosstalk"),
 }
 
 
@@ -137,7 +137,7 @@ def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 10
                            start_offset_ps=float(nominal_offset_ps), pulse_shape=shape,
                            pulse_shape_step_ps=float(pulse_step_ps), pulse_shape_t0_ps=float(pulse_t0_ps),
                            pulse_fwhm_ps=0.0, iterations=int(captures.iterations))
-    sigma_max = _param("pulse_fwhm_ps").hi / FWHM_PER_SIGMA
+    sigma_max = sigma_of_fwhm(_param("pulse_fwhm_ps").hi)
     grid = TimeGrid.for_sensor(nominal, 0.0, 1e12, oversample=int(oversample), sigma_ps=sigma_max)
     extent = irf_extent_ps(nominal, sigma_max)
     pulse = pulse_boxes(nominal)
@@ -153,7 +153,7 @@ def make_model(captures: CaptureSet, pulse_shape=None, pulse_step_ps: float = 10
         nodes = deposit(grid, t, scale * w, rows, n * z, bin_width_ps=bw, start_offset_ps=t0)
         nodes = nodes + deposit(grid, jnp.zeros(n * z), jnp.full(n * z, 1.0) * xt, zero_rows, n * z,
                                 bin_width_ps=bw, start_offset_ps=t0)
-        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=fwhm / FWHM_PER_SIGMA, pulse=pulse, extent_ps=extent,
+        mat = irf_matrix(grid, bin_width_ps=bw, sigma_ps=sigma_of_fwhm(fwhm), pulse=pulse, extent_ps=extent,
                          nominal_bin_width_ps=float(nominal_bin_width_ps))
         return (iters * (nodes @ mat) + noise).reshape(n, z, n_bins)
 

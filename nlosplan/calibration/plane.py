@@ -20,6 +20,7 @@ from nlosplan.errors import UserError
 from nlosplan.calibration.fit import CalibrationFit, fit_sensor_model, usable_zones, zone_scores
 from nlosplan.calibration.model import CaptureSet
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.noise import rate_hz
 from nlosplan.calibration.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
 
 PULSES = ("shape", "gaussian")
@@ -136,7 +137,7 @@ def plane_holdout(captures: DistanceCaptures, arrivals, *, fit_fraction: float =
     return fit, scores
 
 
-def calibrated_sensor(base: SensorConfig, fit: CalibrationFit, floor_per_bin: float | None = None,
+def calibrated_sensor(base: SensorConfig, fit: CalibrationFit, floor_counts: float | None = None,
                       lights_on: bool = True) -> SensorConfig:
     """``base`` with the fitted parameters: a sensor file every other command can use.
 
@@ -145,8 +146,8 @@ def calibrated_sensor(base: SensorConfig, fit: CalibrationFit, floor_per_bin: fl
     or ``dark_rate_hz`` (lights off).
     """
     v = fit.values
-    floor = v["noise_per_bin"] if floor_per_bin is None else float(floor_per_bin)
-    rate = floor / (base.iterations * v["bin_width_ps"] * 1e-12) if base.iterations else 0.0
+    floor = v["floor_counts"] if floor_counts is None else float(floor_counts)
+    rate = rate_hz(floor, base.iterations, v["bin_width_ps"]) if base.iterations else 0.0
     changes = {"photon_scale": v["photon_scale"], "bin_width_ps": v["bin_width_ps"],
                "start_offset_ps": v["start_offset_ps"], "crosstalk": v["crosstalk"],
                "pulse_fwhm_ps": v["pulse_fwhm_ps"], "pulse_shape": fit.pulse_shape}

@@ -124,7 +124,7 @@ def cross_validate(captures, arrivals, base: SensorConfig, *, folds: int = 5, te
         train = np.setdiff1d(idx, test)
         fit: ZoneFit = fit_plane_zones(captures, arrivals, base, zones=zones, terms=terms, indices=train,
                                        min_distance_m=min_distance_m)
-        sensor = zone_sensor(base, fit, floor_per_bin=None)
+        sensor = zone_sensor(base, fit, floor_counts=None)
         _, per = score_plane(sensor, captures, arrivals, indices=test, min_distance_m=min_distance_m)
         arrays = {key: np.asarray(per[key], dtype=np.float64) for key in ("subbin_err", "peak_bin_err", "l1", "amp_ratio")}
         pooled = arrays if pooled is None else {key: np.concatenate([pooled[key], arrays[key]]) for key in arrays}

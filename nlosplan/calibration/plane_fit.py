@@ -32,6 +32,7 @@ from nlosplan.errors import UserError
 from nlosplan.calibration.plane_model import (TERMS, PlaneData, blocks, canonical, check_terms,
                                                             first_return_bin, make_plane_model, pack, unpack)
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.noise import rate_hz
 from nlosplan.sensor_models.counts import coates_correction
 from nlosplan.calibration.tmf882x_fit import DistanceCaptures, fit_pulse_shape, fit_timebase
 
@@ -298,10 +299,10 @@ def fit_plane_zones(captures: DistanceCaptures, arrivals, base: SensorConfig, *,
                    int(idx.size), [float(v) for v in data.distance_m], time.perf_counter() - t_start)
 
 
-def zone_sensor(base: SensorConfig, fit: ZoneFit, *, floor_per_bin: float | None = None) -> SensorConfig:
+def zone_sensor(base: SensorConfig, fit: ZoneFit, *, floor_counts: float | None = None) -> SensorConfig:
     """``base`` with the fitted values: per-zone terms (neutral for zones not fitted), pulse, pile-up, tail.
 
-    ``floor_per_bin`` (counts, lights on) becomes the ambient rate on top of the base's dark rate.
+    ``floor_counts`` (counts per bin, lights on) becomes the ambient rate on top of the base's dark rate.
     """
     v = fit.values
     nz = base.n_zones
@@ -331,7 +332,7 @@ def zone_sensor(base: SensorConfig, fit: ZoneFit, *, floor_per_bin: float | None
     else:
         changes["pulse_tail_fraction"] = 0.0
     changes["time_walk_ps"] = v["time_walk_ps"] if "walk" in fit.terms else 0.0
-    if floor_per_bin is not None:
-        it = changes["iterations"]
-        changes["ambient_rate_hz"] = max(floor_per_bin / (it * v["bin_width_ps"] * 1e-12) - base.dark_rate_hz, 0.0)
+    if floor_counts is not None:
+        rate = rate_hz(floor_counts, changes["iterations"], v["bin_width_ps"])
+        changes["ambient_rate_hz"] = max(rate - base.dark_rate_hz, 0.0)
     return base.replace(name=f"{base.name}-calibrated", **changes)

@@ -36,7 +36,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosplan._jax import jnp
-from nlosplan.constants import C_M_PER_PS
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.counts import pileup_expected
@@ -277,8 +276,3 @@ def check_terms(terms) -> list[str]:
 def first_return_bin(sensor: SensorConfig, pulse_t0_ps: float) -> int:
     """Bins before this one hold no return light (zero optical path, pulse lead and one bin of margin)."""
     return int(math.floor((pulse_t0_ps - sensor.start_offset_ps) / sensor.bin_width_ps)) - 1
-
-
-def range_of(times_ps) -> np.ndarray:
-    """Range ``c t / 2`` of arrival times, metres (for reports)."""
-    return 0.5 * C_M_PER_PS * np.asarray(times_ps)

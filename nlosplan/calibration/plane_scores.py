@@ -70,7 +70,7 @@ def predict_plane(sensor: SensorConfig, times_ps, weights, floor) -> np.ndarray:
     # (captures x zones x arrivals x boxes x bins) numbers
     one = jax.jit(lambda t, w: expected_histogram(lin, t, w))
     lam = np.stack([np.asarray(one(t, w)) for t, w in zip(times_ps, weights)]) / it
-    return np.asarray(counts_from_rates(lam, iterations=it, background_per_bin=np.asarray(floor)[..., None] / it,
+    return np.asarray(counts_from_rates(lam, iterations=it, floor_per_bin=np.asarray(floor)[..., None] / it,
                                         pileup=sensor.pileup, spads=sensor.spads_per_zone, dead_bins=dead_bins(sensor),
                                         max_count=sensor.max_count if sensor.saturation else None))
 

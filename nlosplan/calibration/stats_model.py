@@ -36,6 +36,7 @@ import numpy as np
 from nlosplan.calibration.stats_file import STATISTICS, StatsFile
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.noise import floor_counts
 
 SENSOR_PARAMS = ("photon_scale", "dark_rate_hz", "ambient_rate_hz")
 SCENE_PARAMS = ("albedo", "diffuse_albedo", "mount_albedo", "mount_in_background")
@@ -112,7 +113,7 @@ def components(sensor: SensorConfig, zone=(1, 1), n_positions: int = 10, fidelit
     fidelity : str
         Fast-simulator fidelity.
     """
-    from nlosplan.simulators import FastSimulator, denali_scene
+    from nlosplan.simulators import denali_scene, expected_batch
 
     lin = linear_sensor(sensor)
     zone = (int(zone[0]), int(zone[1]))
@@ -124,7 +125,7 @@ def components(sensor: SensorConfig, zone=(1, 1), n_positions: int = 10, fidelit
     out = {}
     for refl in ("retroreflective", "lambertian"):
         scenes = [denali_scene(o, s, p, reflectance=refl, albedo=1.0) for s in ("4in", "8in") for o, p in pairs]
-        e = FastSimulator(scenes, lin, fidelity=fidelity, zones=[zone], chunk=50).expected(parts=True)
+        e = expected_batch(scenes, lin, fidelity=fidelity, zones=[zone], chunk=50, parts=True).parts
         obj = np.asarray(e["object"], float)[:, 0, :]
         out[refl] = {"4in": obj[:n], "8in": obj[n:]}
         direct = np.asarray(e["direct"], float)[0, 0, :]
@@ -133,8 +134,8 @@ def components(sensor: SensorConfig, zone=(1, 1), n_positions: int = 10, fidelit
     for p in positions:
         sc = denali_scene("A", "8in", p, mount=True, mount_albedo=1.0, mount_in_background=False)
         mscenes.append(sc.replace(objects=sc.objects[1:]))
-    m = np.asarray(FastSimulator(mscenes, lin, fidelity=fidelity, zones=[zone], chunk=50)
-                   .expected(parts=True)["object"], float)[:, 0, :]
+    m = np.asarray(expected_batch(mscenes, lin, fidelity=fidelity, zones=[zone], chunk=50, parts=True)
+                   .parts["object"], float)[:, 0, :]
     index = {p: k for k, p in enumerate(positions)}
     mount = m[[index[p] for _, p in pairs]]
     return Components(zones=f"{sensor.zones_rows}x{sensor.zones_cols}", zone=zone, pairs=pairs, direct=direct,
@@ -172,12 +173,6 @@ def statistics(h: np.ndarray, bins: np.ndarray) -> tuple:
         var = (h * d**2).sum(-1) / tot
         sk = (h * d**3).sum(-1) / tot / var**1.5
     return tot, c, np.sqrt(var), sk
-
-
-def floor_per_bin(sensor: SensorConfig, light: str) -> float:
-    """Floor counts per bin per capture: (dark [+ ambient]) x bin width x iterations."""
-    rate = sensor.dark_rate_hz + (sensor.ambient_rate_hz if light == "on" else 0.0)
-    return rate * sensor.bin_width_ps * 1e-12 * sensor.iterations
 
 
 def _check_params(scene: dict, nuisances: dict) -> None:
@@ -223,7 +218,7 @@ def simulate_rows(comp: Components, sensor: SensorConfig, scene: dict, nuisances
     for i, row in enumerate(stats.rows):
         if row.zones != comp.zones:
             continue
-        f = floor_per_bin(sensor, row.light)
+        f = floor_counts(sensor, row.light == "on")
         sig = k * (scene["albedo"] * comp.retro[row.size][:, crop:] + scene["diffuse_albedo"]
                    * comp.lamb[row.size][:, crop:])
         m_cap = f + direct + sig + early
@@ -245,7 +240,7 @@ def simulate_rows(comp: Components, sensor: SensorConfig, scene: dict, nuisances
     for lev in stats.levels:
         if lev.zones != comp.zones:
             continue
-        raw = [k * comp.direct + floor_per_bin(sensor, light) for light in ("on", "off")]
+        raw = [k * comp.direct + floor_counts(sensor, light == "on") for light in ("on", "off")]
         levels[lev.name] = float(np.mean([r.mean() if lev.statistic == "mean_count" else np.log1p(r).mean()
                                           for r in raw]))
     res = {"rows": out, "levels": levels}

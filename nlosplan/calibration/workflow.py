@@ -33,7 +33,7 @@ from nlosplan.calibration.tmf882x_fit import DistanceCaptures, load_distance_cap
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig, resolve_sensor
 from nlosplan.simulators import WallScene, wall_arrivals
-from nlosplan.simulators.fast.fidelity import resolve_fidelity
+from nlosplan.simulators import resolve_fidelity
 
 __all__ = ["Calibration", "calibrate_denali", "calibrate_plane", "load_denali", "load_plane", "plane_arrivals"]
 
@@ -107,10 +107,16 @@ def load_plane(path, sensor="tmf8828-3x3-short") -> tuple[DistanceCaptures, Sens
     return captures, base
 
 
-def plane_arrivals(base: SensorConfig, n_zones: int) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
-    """``arrivals(d)``: times (ps) and weights, each (zones, rays), of a unit-albedo wall square-on at ``d`` metres."""
+def plane_arrivals(base: SensorConfig, n_zones: int | None = None) -> Callable[[float], tuple[np.ndarray, np.ndarray]]:
+    """``arrivals(d)``: times (ps) and weights, each (zones, rays), of a unit-albedo wall square-on at ``d`` metres.
+
+    ``n_zones`` (default the sensor's) rows, zones row-major: the plane captures' fits, scores and
+    cross-validation all take their arrivals from here.
+    """
+    n_zones = base.n_zones if n_zones is None else int(n_zones)
+
     def arrivals(d):
-        t, w = wall_arrivals(WallScene(distance_m=d, albedo=1.0), base)
+        t, w = wall_arrivals(WallScene(distance_m=float(d), albedo=1.0), base)
         return t.reshape(n_zones, -1), w.reshape(n_zones, -1)
 
     return arrivals

@@ -11,17 +11,6 @@ from nlosplan.errors import UserError
 GLOBAL_ONLY = ("steps", "pulse", "start", "holdout", "bootstrap", "lights")
 
 
-def plane_arrivals(sensor):
-    """``arrivals(d)`` of the plane square-on at ``d`` metres (albedo 1) for ``sensor``, zones row-major."""
-    from nlosplan.simulators import WallScene, wall_arrivals
-
-    def arrivals(d):
-        t, w = wall_arrivals(WallScene(distance_m=float(d), albedo=1.0), sensor)
-        return t.reshape(sensor.n_zones, -1), w.reshape(sensor.n_zones, -1)
-
-    return arrivals
-
-
 def check_global_only(args) -> None:
     """One line when an option of ``--model global`` is given to the all-zone model."""
     defaults = {"steps": "scale,pulse,noise", "holdout": 0.0, "bootstrap": 0}
@@ -64,11 +53,12 @@ def run_zones(args, t0: float) -> int:
 
     from nlosplan.reports.realism_table import format_plane_table
     from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.calibration.plane_cv import cross_validate
+    from nlosplan.calibration.plane_cv import REPORTED, cross_validate
     from nlosplan.calibration.plane_fit import fit_plane_zones, zone_sensor
     from nlosplan.calibration.plane_model import TERMS, check_terms
     from nlosplan.calibration.plane_scores import TARGETS, predict_plane, tables_dict
     from nlosplan.calibration.tmf882x_fit import load_distance_captures
+    from nlosplan.calibration.workflow import plane_arrivals
 
     check_global_only(args)
     terms = check_terms((args.terms or ",".join(TERMS)).split(","))
@@ -88,7 +78,7 @@ def run_zones(args, t0: float) -> int:
     note(args, f"calibrating {base.name} on {captures.distance_m.size} captures, zones {zones}, terms {terms} ...")
     fit = fit_plane_zones(captures, arrivals, base, zones=zones, terms=terms, min_distance_m=min_d)
     idx = np.flatnonzero(captures.distance_m >= min_d)
-    sensor = zone_sensor(base, fit, floor_per_bin=float(np.median(captures.hists[idx][..., :8])))
+    sensor = zone_sensor(base, fit, floor_counts=float(np.median(captures.hists[idx][..., :8])))
     cv = None
     if args.folds:
         note(args, f"cross-validating by distance: {args.folds} folds ...")
@@ -96,8 +86,6 @@ def run_zones(args, t0: float) -> int:
             cv = cross_validate(captures, arrivals, base, folds=args.folds, terms=terms, zones=zones,
                                 min_distance_m=min_d, progress=None if bar is None else (lambda d, t: bar.update(1)))
     errs = cv.errors if cv is not None else {}
-    from nlosplan.calibration.plane_cv import REPORTED
-
     notes = (f"Calibrated by nlosplan calibrate (all-zone plane model, terms {','.join(terms)}) on "
              f"{fit.n_captures} captures of {args.captures} at d >= {min_d} m"
              + (f"; held out by distance ({cv.folds} folds): " + _summary(cv) if cv is not None else "")
@@ -154,6 +142,7 @@ def run_score(args, t0: float) -> int:
     from nlosplan.reports.realism_table import format_plane_table
     from nlosplan.sensor_models import resolve_sensor
     from nlosplan.calibration.score import score_input
+    from nlosplan.calibration.workflow import plane_arrivals
 
     if args.captures:
         raise UserError("give either CAPTURES (to fit) or --score DATA (to score a sensor without fitting), not both")

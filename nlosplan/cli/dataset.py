@@ -6,69 +6,8 @@ import argparse
 from contextlib import contextmanager
 
 from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, seed_type, sub_parser
+from nlosplan.cli.selections import choice_list, fidelity_level, object_list, position_list
 from nlosplan.errors import UserError
-
-
-# ----------------------------------------------------------------- option values
-def _objects(text: str) -> list[str]:
-    """``all``, or DENALI objects and class groups separated by commas (``i``, ``halfcircle`` accepted)."""
-    from nlosplan.denali import CLASS_GROUPS, DENALI_OBJECTS
-    from nlosplan.data.denali_io import OBJECT_ALIASES
-
-    out: list[str] = []
-    for tok in (t.strip() for t in text.split(",")):
-        if tok == "all":
-            out += DENALI_OBJECTS
-        elif tok in CLASS_GROUPS:
-            out += CLASS_GROUPS[tok]
-        elif OBJECT_ALIASES.get(tok, tok) in DENALI_OBJECTS:
-            out.append(OBJECT_ALIASES.get(tok, tok))
-        else:
-            raise argparse.ArgumentTypeError(f"unknown object {tok!r}; allowed: all, {', '.join(CLASS_GROUPS)}, "
-                                             f"{', '.join(DENALI_OBJECTS)}")
-    return list(dict.fromkeys(out))
-
-
-def _positions(text: str) -> list[int]:
-    """``0-99``, ``0,5,9`` or a mix such as ``0-9,20-29`` (gantry positions 0..99)."""
-    from nlosplan.denali import N_POSITIONS
-
-    out: list[int] = []
-    for tok in (t.strip() for t in text.split(",")):
-        lo, sep, hi = tok.partition("-")
-        try:
-            a, b = int(lo), int(hi if sep else lo)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{tok!r} is not a position N or a range N-M "
-                                             "(e.g. 0-99 or 0,5,9)") from None
-        if a > b:
-            raise argparse.ArgumentTypeError(f"range {tok!r} goes down; write it low-high, e.g. {b}-{a}")
-        if a < 0 or b >= N_POSITIONS:
-            raise argparse.ArgumentTypeError(f"{tok!r} is out of range; allowed: positions 0 to {N_POSITIONS - 1}")
-        out += range(a, b + 1)
-    return sorted(set(out))
-
-
-def _choices(allowed: tuple[str, ...]):
-    """An argparse type: a comma-separated list of ``allowed`` names."""
-
-    def parse(text: str) -> list[str]:
-        out = [t.strip() for t in text.split(",") if t.strip()]
-        bad = [t for t in out if t not in allowed]
-        if bad or not out:
-            raise argparse.ArgumentTypeError(f"{', '.join(bad) or repr(text)} not allowed; "
-                                             f"allowed: {', '.join(allowed)}")
-        return list(dict.fromkeys(out))
-
-    return parse
-
-
-def _fidelity(text: str) -> str:
-    from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS
-
-    if text not in FIDELITY_LEVELS:
-        raise argparse.ArgumentTypeError(f"unknown fidelity {text!r}; allowed: {', '.join(FIDELITY_LEVELS)}")
-    return text
 
 
 @contextmanager
@@ -119,7 +58,7 @@ def _check_build_size(args, sensor) -> None:
 
 # ----------------------------------------------------------------- commands
 def _cmd_build(args) -> int:
-    from nlosplan.cli.simulate import _with_warning_lines
+    from nlosplan.cli.simulate import with_warning_lines
     from nlosplan.data.build import build_dataset
     from nlosplan.files import writing
     from nlosplan.sensor_models import resolve_sensor
@@ -135,7 +74,7 @@ def _cmd_build(args) -> int:
     with writing(cont="free some space and rerun the same command: it resumes where it stopped"), \
             _store(args, create=True, synchronous="FULL" if args.fsync else "NORMAL") as store, \
             _progress(args, "dataset build", "capture") as progress:
-        res, warned = _with_warning_lines(
+        res, warned = with_warning_lines(
             build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
             positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
             seed=args.seed, reflectance=args.reflectance, scene_options=options, batch=args.batch,
@@ -250,12 +189,12 @@ skipped (rerun to resume). Files that need pickle are refused unless
 
 def _filters(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("filters (all given must hold)")
-    g.add_argument("--objects", type=_objects, metavar="A,S,...", help="objects, class groups or 'all'")
-    g.add_argument("--sizes", type=_choices(("4in", "8in")), metavar="4in,8in", help="object sizes")
-    g.add_argument("--lights", type=_choices(("on", "off")), metavar="on,off", help="room lights")
+    g.add_argument("--objects", type=object_list, metavar="A,S,...", help="objects, class groups or 'all'")
+    g.add_argument("--sizes", type=choice_list(("4in", "8in")), metavar="4in,8in", help="object sizes")
+    g.add_argument("--lights", type=choice_list(("on", "off")), metavar="on,off", help="room lights")
     g.add_argument("--zones", type=lambda t: [z.strip() for z in t.split(",") if z.strip()], metavar="3x3,8x8",
                    help="zone modes")
-    g.add_argument("--positions", type=_positions, metavar="0-99", help="gantry positions, e.g. 0-99 or 0,5,9")
+    g.add_argument("--positions", type=position_list, metavar="0-99", help="gantry positions, e.g. 0-99 or 0,5,9")
     g.add_argument("--source", metavar="NAME", help="capture source, e.g. real:denali or sim:fast")
     g.add_argument("--sensor-hash", metavar="HASH", help="one stored sensor (see 'nlosplan dataset info')")
     g.add_argument("--seed", type=seed_type(), help="build seed of simulated captures")
@@ -276,16 +215,16 @@ def add(sub) -> None:
     b.add_argument("--sensor", default="denali-tmf8828-3x3",
                    help="preset name or sensor file (default: %(default)s, DENALI's unit calibrated on Table 2, "
                         "whose scenes take the fitted retro albedo, diffuse base and mount in the signal)")
-    b.add_argument("--objects", type=_objects, default=_objects("all"), metavar="A,S,...",
+    b.add_argument("--objects", type=object_list, default=object_list("all"), metavar="A,S,...",
                    help="objects, class groups (numbers, letters, shapes) or 'all' (default: all 30)")
-    b.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
+    b.add_argument("--sizes", type=choice_list(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
                    help="object sizes (default: 4in,8in)")
-    b.add_argument("--positions", type=_positions, default=_positions("0-99"), metavar="0-99",
+    b.add_argument("--positions", type=position_list, default=position_list("0-99"), metavar="0-99",
                    help="gantry positions, e.g. 0-99, 0,5,9 or 0-9,50-59 (default: 0-99)")
-    b.add_argument("--lights", type=_choices(("on", "off")), default=["off"], metavar="on,off",
+    b.add_argument("--lights", type=choice_list(("on", "off")), default=["off"], metavar="on,off",
                    help="room lights (default: off)")
     b.add_argument("--repeats", type=int_type(1), default=3, help="Poisson captures per scene (default: 3)")
-    b.add_argument("--fidelity", type=_fidelity, default="default",
+    b.add_argument("--fidelity", type=fidelity_level, default="default",
                    help="simulator level: draft, low, default, high, reference (default: default)")
     b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
                    help="object reflectance (default: retroreflective)")

@@ -6,8 +6,8 @@ import argparse
 
 from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
-
-MAX_SEED = 1_000_000  # nlosplan.planner.design.search.MAX_SEED (not imported: --help stays light)
+from nlosplan.resources import MAX_DESIGN_SEED
+from nlosplan.simulators import BACKENDS
 
 DEFAULT_OUT = "nlosplan-out/design"
 
@@ -61,7 +61,7 @@ JSON: {"cheapest": [{"requirement", "verdict", "design", "value", "lo", "hi",
 "report": PATH}."""
 
 
-def _requirement(text: str):
+def requirement_type(text: str):
     from nlosplan.planner.design.requirements import parse_requirement
 
     try:
@@ -187,15 +187,15 @@ def add(sub) -> None:
                         "minutes")
     p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
                                                      "(see nlosplan/planner/design/config.py for the tables)")
-    p.add_argument("--requirement", action="append", type=_requirement, metavar="REQ",
+    p.add_argument("--requirement", action="append", type=requirement_type, metavar="REQ",
                    help="a requirement, repeatable, e.g. loc<=0.03, shape>=0.5, size>=0.9@lights=on "
                         "(replaces the defaults)")
-    p.add_argument("--backend", choices=("fast", "mitsuba"), default="fast",
+    p.add_argument("--backend", choices=tuple(BACKENDS), default="fast",
                    help="simulator of the reference histograms: the fast JAX backend (default) or the Mitsuba 3 twin "
                         "(about 0.1 s per scene: the full run's 15,000 scenes take ~30 min; bounds' Jacobians stay fast)")
     p.add_argument("--seeds", type=int_type(1, 20), default=None, help="seeds of the verification (default 3; quick 2)")
-    p.add_argument("--seed", type=int_type(0, MAX_SEED), default=None,
-                   help=f"the run's seed, 0 to {MAX_SEED} (default 0): Poisson noise, train/test splits, training "
+    p.add_argument("--seed", type=int_type(0, MAX_DESIGN_SEED), default=None,
+                   help=f"the run's seed, 0 to {MAX_DESIGN_SEED} (default 0): Poisson noise, train/test splits, training "
                         "seeds and the worlds are drawn from it")
     p.add_argument("--models", type=_models, default=None, metavar="M1,M2",
                    help="candidate learners, compared on the reference design; the best per task is used "

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 from nlosplan.cli.common import command_group, emit, int_type, note, number_type, progress_bar, seed_type, sub_parser
-from nlosplan.cli.dataset import _choices, _fidelity, _objects, _positions
+from nlosplan.cli.selections import choice_list, fidelity_level, object_list, position_list
 from nlosplan.errors import UserError
 
 DEFAULT_SENSOR = "tmf8828-3x3-short"
@@ -223,12 +223,12 @@ both sizes). Fewer positions or --fidelity draft are much faster."""
 def _common(p, *, jitter: bool) -> None:
     """--sensor, --objects, --positions, --lights, --fidelity, --photon-scale (and --jitter-ps), --json."""
     p.add_argument("--sensor", default=DEFAULT_SENSOR, help="preset name or sensor file (default: %(default)s)")
-    p.add_argument("--objects", type=_objects, default=_objects("all"), metavar="A,S,...",
+    p.add_argument("--objects", type=object_list, default=object_list("all"), metavar="A,S,...",
                    help="objects, class groups (numbers, letters, shapes) or 'all' (default: all 30)")
-    p.add_argument("--positions", type=_positions, default=_positions("0-99"), metavar="0-99",
+    p.add_argument("--positions", type=position_list, default=position_list("0-99"), metavar="0-99",
                    help="gantry positions, e.g. 0-99, 0,5,9 or 0-9,50-59 (default: 0-99)")
     p.add_argument("--lights", choices=("on", "off"), default="off", help="room lights (default: off)")
-    p.add_argument("--fidelity", type=_fidelity, default="default",
+    p.add_argument("--fidelity", type=fidelity_level, default="default",
                    help="simulator level: draft, low, default, high, reference (default: default)")
     p.add_argument("--photon-scale", type=number_type(float, zero_ok=True), metavar="F",
                    help="replace the sensor's photon scale (detected photons per unit response; >= 0)")
@@ -250,12 +250,12 @@ def add(sub) -> None:
                    "Cramer-Rao lower bound on localization RMSE (unbiased estimators), per object and size",
                    description=CRLB_DESCRIPTION)
     _common(c, jitter=True)
-    c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["8in"], metavar="4in,8in",
+    c.add_argument("--sizes", type=choice_list(("4in", "8in")), default=["8in"], metavar="4in,8in",
                    help="object sizes (default: 8in)")
     c.add_argument("--repeats", type=int_type(1, 1_000_000), default=1,
                    help="independent captures per scene, 1 to 1,000,000 (default: 1; the bound scales as "
                         "1/sqrt(repeats))")
-    c.add_argument("--nuisance", type=_choices(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
+    c.add_argument("--nuisance", type=choice_list(_NUISANCE_CHOICES), default=["photon_scale"], metavar="N,N",
                    help="nuisance parameters estimated with the position, among photon_scale, ambient, dark, "
                         "albedo, or 'none' (default: photon_scale)")
     c.set_defaults(func=_cmd_crlb)

@@ -11,6 +11,7 @@ from nlosplan.cli.common import emit, int_type, note, number_type, seed_type, su
 from nlosplan.errors import UserError
 from nlosplan.files import writing
 from nlosplan.sensor_models.config import MAX_BINS
+from nlosplan.simulators import BACKENDS
 
 SCENES = ("denali", "corner", "wall")
 DEFAULT_OUT = "nlosplan-out/simulate"
@@ -111,7 +112,7 @@ def _parse_zones(text: str) -> list[tuple[int, int]]:
     return zones
 
 
-def _with_warning_lines(func, *a, **kw):
+def with_warning_lines(func, *a, **kw):
     """Call ``func``; print each NLOSWarning it issues as one ``nlosplan: warning:`` line on stderr.
 
     Returns
@@ -362,7 +363,7 @@ def _simulate_nlos(args, sensor, out, legacy, plot) -> int:
     fidelity = args.fidelity or "default"
     if out is None:  # --explain alone: the plan, no simulation, no files
         _warn_before_work(args, None, False)
-        plan, warned = _with_warning_lines(explain, scene, sensor, fidelity=fidelity, zones=zones)
+        plan, warned = with_warning_lines(explain, scene, sensor, fidelity=fidelity, zones=zones)
         data = {"scene": {"kind": args.scene, "name": scene.name}, "sensor": sensor.name, "fidelity": fidelity,
                 "plan": plan.to_dict(), "warnings": warned}
         emit(args, data, plan.explain())
@@ -370,7 +371,7 @@ def _simulate_nlos(args, sensor, out, legacy, plot) -> int:
     _check_memory(args, sensor, len(zones) if zones is not None else sensor.n_zones, out)
     _warn_before_work(args, out, legacy)
     note(args, f"simulating {scene.name} with {sensor.name} ({backend} backend, fidelity {fidelity}) ...")
-    result, warned = _with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
+    result, warned = with_warning_lines(simulate, scene, sensor, rng=args.seed, repeats=args.repeats,
                                          fidelity=fidelity, zones=zones, backend=backend, **_given(args, dtype="dtype"))
     files = _save({k: getattr(result, k) for k in NLOS_FILES}, _file_paths(out, legacy, NLOS_FILES), result.seconds)
     with writing(kept="the arrays are written", cont="free some space or choose another --plot and rerun"):
@@ -478,6 +479,32 @@ def _scene_options(group, scenes: tuple[str, ...], registry: dict):
     return add
 
 
+def _add_sensor_and_output(sim) -> None:
+    """The options of every scene: the sensor and its overrides, the capture and the outputs."""
+    sen = sim.add_argument_group("sensor (all scenes)")
+    sen.add_argument("--sensor", default=None,
+                     help="preset name or sensor file (default: denali-tmf8828-3x3 for --scene denali, DENALI's unit "
+                          "calibrated on the real Table 2, whose scene model sets the object's albedo, diffuse base "
+                          f"and mount; {GENERIC_SENSOR} for corner and wall)")
+    sen.add_argument("--jitter-ps", type=number_type(float, zero_ok=True), metavar="J",
+                     help="override timing jitter FWHM, ps (>= 0)")
+    sen.add_argument("--bins", type=int_type(1, MAX_BINS), metavar="N", help=f"override number of bins (1 to {MAX_BINS})")
+    sen.add_argument("--bin-width-ps", type=number_type(float), metavar="W", help="override bin width, ps (> 0)")
+    sen.add_argument("--zones", type=zones_type, metavar="RxC",
+                     help="override the zone grid, e.g. 8x8 (the preset's field of view and iterations stay: a warning "
+                          "says so; pick the preset of that zone mode instead)")
+
+    out = sim.add_argument_group("capture and output (all scenes)")
+    out.add_argument("--lights", choices=["on", "off"], default="off", help="room lights (default: off)")
+    out.add_argument("--repeats", type=int_type(0), default=1, help="noisy captures to draw (default: 1; 0 for none)")
+    out.add_argument("--seed", type=seed_type(), default=0, help="random seed of the noisy captures, 0 to 2**32-1 "
+                                                                 "(default: 0)")
+    out.add_argument("--out", metavar="DIR", help=f"output folder, files with fixed names inside (default: {DEFAULT_OUT})")
+    out.add_argument("--plot", nargs="?", const=True, metavar="PATH",
+                     help=f"also plot every zone: OUT/{PLOT_FILE}, or PATH (.png, .pdf, .svg, ...)")
+    out.add_argument("--json", action="store_true", help="machine-readable summary")
+
+
 def add(sub) -> None:
     """The ``simulate`` subcommand; scene-specific options are recorded in ``args.scene_options``."""
     sim = sub_parser(sub, "simulate", "simulate", "simulate one capture (DENALI rig, corner or wall) and plot every zone",
@@ -518,7 +545,7 @@ def add(sub) -> None:
     add("--diffuse-albedo", type=number_type(float, zero_ok=True, hi=1.0), metavar="A",
         help="Lambertian base of a retroreflective object, 0..1, with object albedo + diffuse albedo <= 1 "
              "(default: the sensor's scene model, 0.2 for denali-tmf8828-*; else 0)")
-    add("--backend", choices=["fast", "mitsuba"],
+    add("--backend", choices=list(BACKENDS),
         help="transport: fast (JAX, default) or mitsuba (the Mitsuba 3 + mitransient twin, CPU llvm_ad_rgb or "
              "cuda_ad_rgb; e.g. --backend mitsuba --fidelity low takes ~10 s on 2 cores)")
     add("--fidelity", metavar="LEVEL",
@@ -536,27 +563,6 @@ def add(sub) -> None:
     add("--albedo", type=float, metavar="A", help="wall albedo, 0..1 (default: 0.8)")
     add("--samples", type=int, metavar="N", help="sub-rays per zone axis, the wall's fidelity knob (default: 4)")
 
-    sen = sim.add_argument_group("sensor (all scenes)")
-    sen.add_argument("--sensor", default=None,
-                     help="preset name or sensor file (default: denali-tmf8828-3x3 for --scene denali, DENALI's unit "
-                          "calibrated on the real Table 2, whose scene model sets the object's albedo, diffuse base "
-                          f"and mount; {GENERIC_SENSOR} for corner and wall)")
-    sen.add_argument("--jitter-ps", type=number_type(float, zero_ok=True), metavar="J",
-                     help="override timing jitter FWHM, ps (>= 0)")
-    sen.add_argument("--bins", type=int_type(1, MAX_BINS), metavar="N", help=f"override number of bins (1 to {MAX_BINS})")
-    sen.add_argument("--bin-width-ps", type=number_type(float), metavar="W", help="override bin width, ps (> 0)")
-    sen.add_argument("--zones", type=zones_type, metavar="RxC",
-                     help="override the zone grid, e.g. 8x8 (the preset's field of view and iterations stay: a warning "
-                          "says so; pick the preset of that zone mode instead)")
-
-    out = sim.add_argument_group("capture and output (all scenes)")
-    out.add_argument("--lights", choices=["on", "off"], default="off", help="room lights (default: off)")
-    out.add_argument("--repeats", type=int_type(0), default=1, help="noisy captures to draw (default: 1; 0 for none)")
-    out.add_argument("--seed", type=seed_type(), default=0, help="random seed of the noisy captures, 0 to 2**32-1 "
-                                                                 "(default: 0)")
-    out.add_argument("--out", metavar="DIR", help=f"output folder, files with fixed names inside (default: {DEFAULT_OUT})")
-    out.add_argument("--plot", nargs="?", const=True, metavar="PATH",
-                     help=f"also plot every zone: OUT/{PLOT_FILE}, or PATH (.png, .pdf, .svg, ...)")
-    out.add_argument("--json", action="store_true", help="machine-readable summary")
+    _add_sensor_and_output(sim)
     sim.set_defaults(func=_cmd_simulate, scene_options=only)
 

@@ -1,7 +1,7 @@
 """Simulated DENALI datasets: batches of scenes through the fast simulator, Poisson captures, into a store.
 
 Each (object, size, lights) group is simulated in batches of gantry positions
-through one :class:`~nlosplan.simulators.fast.simulator.FastSimulator` (one
+through the fast backend's batch seam (:func:`~nlosplan.simulators.expected_batch`: one
 compiled program per batch shape, shared between groups); each scene then
 gets ``repeats`` Poisson captures drawn with its own seed, derived from
 ``(seed, object, size, position, lights)`` alone. Every capture is committed
@@ -39,7 +39,7 @@ from nlosplan._jax import jax, jnp
 from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES, class_group, positions_xy
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.pipeline import sample_counts
+from nlosplan.sensor_models.noise import CaptureNoise
 from nlosplan.simulators.presets.denali import denali_scene
 from nlosplan.simulators.scene import NLOSWarning
 from nlosplan.data.denali_io import OBJECT_ALIASES
@@ -61,18 +61,15 @@ def scene_seed(seed: int, obj: str, size: str, position: int, lights: str) -> in
     return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little") >> 1
 
 
-def _draw_scene(key, mean, repeats: int, saturation: bool, max_count: int):
-    return sample_counts(key, jnp.broadcast_to(mean, (repeats,) + mean.shape), saturation=saturation,
-                         max_count=max_count)
-
-
-@partial(jax.jit, static_argnums=(2, 3, 4))
-def _draw_batch(keys, means, repeats: int, saturation: bool, max_count: int):
-    return jax.vmap(lambda k, m: _draw_scene(k, m, repeats, saturation, max_count))(keys, means)
+@partial(jax.jit, static_argnums=(2, 3))
+def _draw_batch(keys, means, repeats: int, noise: CaptureNoise):
+    return jax.vmap(lambda k, m: noise.draw(k, jnp.broadcast_to(m, (repeats,) + m.shape)))(keys, means)
 
 
 def draw_captures(means: np.ndarray, seeds: Sequence[int], repeats: int, sensor: SensorConfig) -> np.ndarray:
-    """Poisson captures of a batch of scenes, each from its own seed.
+    """Captures of a batch of scenes, each from its own seed.
+
+    Drawn by the sensor's :class:`~nlosplan.sensor_models.noise.CaptureNoise`.
 
     Parameters
     ----------
@@ -82,16 +79,15 @@ def draw_captures(means: np.ndarray, seeds: Sequence[int], repeats: int, sensor:
         Noise seeds (0 to 2**64 - 1), e.g. from :func:`scene_seed`.
     repeats : int
     sensor : SensorConfig
-        Its 24-bit saturation is applied.
+        Its noise model (Poisson, 24-bit clip).
 
     Returns
     -------
     ndarray of int64, shape (N, repeats, rows, cols, bins)
-        Scene ``i`` equals ``sample_counts(jax.random.key(seeds[i]), means[i] repeated)``.
+        Scene ``i`` equals ``CaptureNoise.of(sensor).draw(jax.random.key(seeds[i]), means[i] repeated)``.
     """
     keys = jax.vmap(jax.random.key)(jnp.asarray(np.asarray(seeds, dtype=np.uint64)))
-    return np.asarray(_draw_batch(keys, jnp.asarray(means), int(repeats), bool(sensor.saturation),
-                                  int(sensor.max_count)))
+    return np.asarray(_draw_batch(keys, jnp.asarray(means), int(repeats), CaptureNoise.of(sensor)))
 
 
 def _check_list(name: str, values, allowed: Sequence) -> list:
@@ -173,8 +169,7 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
     ...     build_dataset(st, sensor="tmf8828-3x3-short", objects=["A", "7"], positions=range(10), repeats=3)
     """
     from nlosplan import __version__
-    from nlosplan.simulators.fast.fidelity import resolve_fidelity
-    from nlosplan.simulators.fast.simulator import FastSimulator
+    from nlosplan.simulators import expected_batch, resolve_fidelity
 
     t_start = time.perf_counter()
     if scene not in SCENES:
@@ -231,10 +226,10 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
                     if missing:
                         t0 = time.perf_counter()
                         scenes = [denali_scene(obj, size, p, light, **options) for p in chunk]
-                        sim = FastSimulator(scenes, sensor, fidelity=knobs)
-                        messages += [w for w in sim.plan.warnings if w not in messages]
+                        sim = expected_batch(scenes, sensor, fidelity=knobs)
+                        messages += [w for w in sim.warnings if w not in messages]
                         seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
-                        counts = draw_captures(sim.expected(), seeds, repeats, sensor)
+                        counts = draw_captures(sim.expected, seeds, repeats, sensor)
                         t1 = time.perf_counter()
                         index = {p: i for i, p in enumerate(chunk)}
                         items = [(counts[index[p], r], labels(obj, size, light, p, r),

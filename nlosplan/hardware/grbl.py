@@ -136,10 +136,6 @@ class Grbl(GrblLink):
         self.ngc = parse_ngc_parameters(self.send("$#"))
         return self.settings
 
-    def settings_now(self) -> dict[int, float]:
-        """``$$``: the settings as ``{number: value}``."""
-        return parse_settings(self.send("$$"))
-
     def set_setting(self, number: int, value: float) -> None:
         """``$N=value`` (one at a time, as GRBL asks)."""
         self.send(f"${int(number)}={value:g}")

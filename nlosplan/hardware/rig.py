@@ -20,7 +20,7 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["DEVICES", "Rig", "device_errors", "emulated_rig", "open_gantry", "open_rig", "rig_session",
+__all__ = ["DEVICES", "Rig", "RigOptions", "device_errors", "emulated_rig", "open_gantry", "open_rig", "rig_session",
            "sensor_preset"]
 
 DEVICES = ("lidar", "gantry")
@@ -196,7 +196,7 @@ class SceneHistograms:
     def __call__(self, zones: str, range_mode: str):
         import numpy as np
 
-        from nlosplan.simulators import FastSimulator
+        from nlosplan.simulators import expected_batch
 
         sensor = sensor_preset(zones, range_mode)
         x, y = self.position()
@@ -213,7 +213,7 @@ class SceneHistograms:
                     self._anchors[akey] = [self._scene(ax, ay, lights, sensor) for ax in (x0, x1) for ay in (y0, y1)]
                 anchors = self._anchors[akey]
             scenes = [self._scene(x, y, lights, sensor), *anchors]
-            hit = np.asarray(FastSimulator(scenes, sensor, fidelity=self.fidelity).expected())[0]
+            hit = np.asarray(expected_batch(scenes, sensor, fidelity=self.fidelity).expected)[0]
             self.computed += 1
             with self._lock:
                 if len(self._cache) >= self._max:
@@ -241,16 +241,9 @@ def _gantry_emulator(kind: str, *, time_scale: float, limits_mm, faults, setting
     raise UserError(f"an emulated gantry is grbl or telemetrix, not {kind!r} (auto probes a real port)")
 
 
-@contextmanager
-def rig_session(*, lidar=None, gantry=None, emulate=DEVICES, gantry_kind: str = "grbl", telemetrix=None,
-                work_offset="auto", zones: str = "3x3", range_mode: str = "short", baudrate: int = 2_000_000,
-                sensor_config=None, limits_mm=((0.0, 320.0), (0.0, 320.0)), feed_mm_min: float = 3000.0,
-                lights=None, lights_on: bool = False, home: bool = False, unlock: bool = False, park_mm=(0.0, 0.0),
-                geometry: str | None = "denali", obj: str = "A", size: str = "8in", fidelity: str = "draft",
-                seed: int = 0, time_scale: float = 20.0, frame_period_s: float = 0.02, sensor_faults=None,
-                gantry_faults=None, gantry_settings: dict | None = None, quiet_s: float = 0.05,
-                frame_timeout: float = 5.0) -> Iterator[Rig]:
-    """Open the rig (gantry, then sensor), each device on its port or on a pty emulator; close it at the end.
+@dataclass(frozen=True)
+class RigOptions:
+    """How :func:`rig_session` opens the rig: the devices, the sensor's mode, the motion, the emulators.
 
     Parameters
     ----------
@@ -262,12 +255,58 @@ def rig_session(*, lidar=None, gantry=None, emulate=DEVICES, gantry_kind: str = 
         The Telemetrix rig file (default: DENALI's).
     work_offset : "auto", "keep" or (x, y)
         GRBL only (:mod:`~nlosplan.hardware.grbl_frame`).
+    baudrate : int
+        The real sensor's.
+    zones, range_mode, sensor_config
+        The sensor's mode, and its model (default: the preset of the mode).
+    limits_mm, feed_mm_min, home, unlock, park_mm, geometry
+        The motion: limits, feed, GRBL homing and unlock, where to park at the end, the rig's geometry.
     lights : lights object, optional
         For a real sensor (default: ask a person); an emulated sensor has emulated lights (``lights_on``).
     obj, size, fidelity, seed, frame_period_s, sensor_faults, quiet_s, frame_timeout
         The emulated sensor.
     time_scale, gantry_faults, gantry_settings
         The emulated gantry (``gantry_settings``: GRBL ``$N`` values).
+    """
+
+    lidar: object = None
+    gantry: object = None
+    emulate: tuple = DEVICES
+    gantry_kind: str = "grbl"
+    telemetrix: object = None
+    work_offset: object = "auto"
+    baudrate: int = 2_000_000
+    zones: str = "3x3"
+    range_mode: str = "short"
+    sensor_config: object = None
+    limits_mm: tuple = ((0.0, 320.0), (0.0, 320.0))
+    feed_mm_min: float = 3000.0
+    home: bool = False
+    unlock: bool = False
+    park_mm: object = (0.0, 0.0)
+    geometry: str | None = "denali"
+    lights: object = None
+    lights_on: bool = False
+    obj: str = "A"
+    size: str = "8in"
+    fidelity: str = "draft"
+    seed: int = 0
+    frame_period_s: float = 0.02
+    sensor_faults: object = None
+    quiet_s: float = 0.05
+    frame_timeout: float = 5.0
+    time_scale: float = 20.0
+    gantry_faults: object = None
+    gantry_settings: dict | None = None
+
+
+@contextmanager
+def rig_session(options: RigOptions) -> Iterator[Rig]:
+    """Open the rig (gantry, then sensor), each device on its port or on a pty emulator; close it at the end.
+
+    Parameters
+    ----------
+    options : RigOptions
 
     Yields
     ------
@@ -282,39 +321,42 @@ def rig_session(*, lidar=None, gantry=None, emulate=DEVICES, gantry_kind: str = 
     from nlosplan.hardware.lights import EmulatedLights, ManualLights
     from nlosplan.hardware.tmf8828 import TMF8828
 
-    emulate = tuple(d for d in DEVICES if d in set(emulate))
-    for name, port in (("lidar", lidar), ("gantry", gantry)):
+    o = options
+    emulate = tuple(d for d in DEVICES if d in set(o.emulate))
+    for name, port in (("lidar", o.lidar), ("gantry", o.gantry)):
         if name in emulate and port is not None:
             raise UserError(f"--{name} {port} and an emulated {name} name the same device: drop one")
         if name not in emulate and port is None:
             raise UserError(f"give --{name} PORT for the real {name}, or emulate it")
-    cfg = sensor_config or sensor_preset(zones, range_mode)
+    cfg = o.sensor_config or sensor_preset(o.zones, o.range_mode)
     emulators, sensor, g = [], None, None
     try:
         if "gantry" in emulate:
-            g_emu, position = _gantry_emulator(gantry_kind, time_scale=time_scale, limits_mm=limits_mm,
-                                               faults=gantry_faults, settings=gantry_settings, telemetrix=telemetrix)
+            g_emu, position = _gantry_emulator(o.gantry_kind, time_scale=o.time_scale, limits_mm=o.limits_mm,
+                                               faults=o.gantry_faults, settings=o.gantry_settings,
+                                               telemetrix=o.telemetrix)
             emulators.append(g_emu.start())
-            g = open_gantry(gantry_kind, g_emu.port, limits_mm=limits_mm, feed_mm_min=feed_mm_min,
-                            work_offset=work_offset, telemetrix=telemetrix, home=home, unlock=unlock, poll_s=0.01)
+            g = open_gantry(o.gantry_kind, g_emu.port, limits_mm=o.limits_mm, feed_mm_min=o.feed_mm_min,
+                            work_offset=o.work_offset, telemetrix=o.telemetrix, home=o.home, unlock=o.unlock,
+                            poll_s=0.01)
         else:
-            g = open_gantry(gantry_kind, gantry, limits_mm=limits_mm, feed_mm_min=feed_mm_min,
-                            work_offset=work_offset, telemetrix=telemetrix, home=home, unlock=unlock)
+            g = open_gantry(o.gantry_kind, o.gantry, limits_mm=o.limits_mm, feed_mm_min=o.feed_mm_min,
+                            work_offset=o.work_offset, telemetrix=o.telemetrix, home=o.home, unlock=o.unlock)
 
             def position():
-                return g.last_xy or (limits_mm[0][0], limits_mm[1][0])
+                return g.last_xy or (o.limits_mm[0][0], o.limits_mm[1][0])
         if "lidar" in emulate:
-            light = EmulatedLights(lights_on)
-            hist = SceneHistograms(obj, size, position, light, fidelity, limits_mm=limits_mm)
-            hist(zones, range_mode)  # compile the simulator before the sensor streams
-            s_emu = EmulatedTMF8828(hist, frame_period_s=frame_period_s, seed=seed, faults=sensor_faults).start()
+            light = EmulatedLights(o.lights_on)
+            hist = SceneHistograms(o.obj, o.size, position, light, o.fidelity, limits_mm=o.limits_mm)
+            hist(o.zones, o.range_mode)  # compile the simulator before the sensor streams
+            s_emu = EmulatedTMF8828(hist, frame_period_s=o.frame_period_s, seed=o.seed, faults=o.sensor_faults).start()
             emulators.append(s_emu)
-            sensor = TMF8828(s_emu.port, quiet_s=quiet_s, frame_timeout=frame_timeout)
+            sensor = TMF8828(s_emu.port, quiet_s=o.quiet_s, frame_timeout=o.frame_timeout)
         else:
-            light = lights or ManualLights()
-            sensor = TMF8828(lidar, baudrate=baudrate)
-        rig = Rig(sensor, g, light, cfg, geometry, feed_mm_min, park_mm, emulate, tuple(emulators))
-        sensor.start(zones, range_mode)
+            light = o.lights or ManualLights()
+            sensor = TMF8828(o.lidar, baudrate=o.baudrate)
+        rig = Rig(sensor, g, light, cfg, o.geometry, o.feed_mm_min, o.park_mm, emulate, tuple(emulators))
+        sensor.start(o.zones, o.range_mode)
         yield rig
     finally:
         for dev in (sensor, g):
@@ -334,9 +376,9 @@ def emulated_rig(**kw) -> Iterator[Rig]:
     """
     if "lights" in kw:
         kw["lights_on"] = bool(kw.pop("lights"))
-    return rig_session(emulate=DEVICES, **kw)
+    return rig_session(RigOptions(emulate=DEVICES, **kw))
 
 
 def open_rig(lidar, gantry, **kw) -> Iterator[Rig]:
     """Both devices real (:func:`rig_session` with ``emulate=()``); a context manager."""
-    return rig_session(lidar=lidar, gantry=gantry, emulate=(), **kw)
+    return rig_session(RigOptions(lidar=lidar, gantry=gantry, emulate=(), **kw))

@@ -45,13 +45,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nlosplan.constants import MAX_COUNT_24BIT as MAX_COUNT  # a bin register's maximum, defined once
+
 __all__ = ["AssemblerStats", "Dump", "Frame", "FrameAssembler", "LineError", "ObjResult", "RangeMode", "ZoneMode",
            "dump_lines", "frame_dumps", "obj_line", "parse_hist_line", "parse_obj_line", "start_sequence", "zone_map", "zone_map_8x8"]
 
 N_BINS = 128
 N_CHANNELS = 10
 N_LINES = 30  # lines per dump: 10 channels x 3 byte planes
-MAX_COUNT = (1 << 24) - 1
 
 
 class ZoneMode(enum.Enum):

@@ -17,31 +17,34 @@ from scipy.special import erfc
 
 from nlosplan._jax import jax, jnp
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.pipeline import background_per_bin, expected_counts, sample_counts
+from nlosplan.constants import MAX_COUNT_24BIT
+from nlosplan.sensor_models.noise import CaptureNoise, floor_per_bin
+from nlosplan.sensor_models.pipeline import expected_counts
 from nlosplan.sensor_models.presets import preset
 
 
 def _frame_fn(sensor: SensorConfig, dtype) -> Callable:
     edges = jnp.asarray(sensor.bin_edges_ps(), dtype)
-    bg = background_per_bin(sensor, lights_on=True)
+    bg = floor_per_bin(sensor, lights_on=True)
+    noise = CaptureNoise(MAX_COUNT_24BIT)
 
     def frame(key, times, weights):
         mean = expected_counts(
-            times, weights, edges_ps=edges, sigma_ps=jnp.asarray(sensor.sigma_ps, dtype),
+            times, weights, edges_ps=edges, sigma_ps=jnp.asarray(sensor.impulse_sigma_ps, dtype),
             photon_scale=sensor.photon_scale, iterations=float(sensor.iterations),
-            background_per_bin=bg, max_count=None,
+            floor_per_bin=bg, max_count=None,
         )
-        return sample_counts(key, mean, saturation=True)
+        return noise.draw(key, mean)
 
     return frame
 
 
 def _numpy_frame(rng, sensor: SensorConfig, times, weights):
     edges = sensor.bin_edges_ps()
-    s = sensor.sigma_ps
+    s = sensor.impulse_sigma_ps
     cdf = 0.5 * erfc(-(edges - times[..., None]) / (s * np.sqrt(2)))
     lam = np.einsum("...kb,...k->...b", np.diff(cdf, axis=-1), weights * sensor.photon_scale)
-    lam = lam + background_per_bin(sensor, True)
+    lam = lam + floor_per_bin(sensor, True)
     return np.minimum(rng.poisson(lam * sensor.iterations), sensor.max_count)
 
 

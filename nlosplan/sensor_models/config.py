@@ -203,8 +203,8 @@ class SensorConfig:
         return self.n_bins * self.bin_width_ps
 
     @property
-    def sigma_ps(self) -> float:
-        """Standard deviation of the Gaussian part of the impulse response, ps.
+    def impulse_sigma_ps(self) -> float:
+        """Standard deviation of the Gaussian part of the impulse response, ps (:func:`.impulse.impulse_sigma_ps`).
 
         ``sqrt(sigma_pulse**2 + sigma_jitter**2)`` with sigma = FWHM / 2.3548.
         """

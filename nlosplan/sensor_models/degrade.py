@@ -28,9 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlosplan.constants import FWHM_PER_SIGMA
 from nlosplan.errors import UserError
-from nlosplan.sensor_models.impulse import impulse_fwhm_ps
+from nlosplan.sensor_models.impulse import impulse_fwhm_ps, sigma_of_fwhm
 
 __all__ = ["Degradation", "reach", "degrade_expected", "degrade_linear", "degrade_counts", "jitter_kernel",
            "pool_zones", "merge_bins"]
@@ -138,11 +137,12 @@ def merge_bins(h: np.ndarray, factor: int, n_bins: int) -> np.ndarray:
     return h.reshape(*h.shape[:-1], n_bins, factor).sum(axis=-1)
 
 
-def jitter_kernel(fwhm_ps: float, bin_width_ps: float, *, cutoff_sigmas: float = 5.0) -> tuple[np.ndarray, int]:
+def jitter_kernel(extra_jitter_fwhm_ps: float, bin_width_ps: float, *,
+                  cutoff_sigmas: float = 5.0) -> tuple[np.ndarray, int]:
     """Probabilities that a count moves by ``k`` bins under Gaussian jitter.
 
     A count uniform within its bin, displaced by a Gaussian of FWHM
-    ``fwhm_ps``, lands ``k`` bins away with the probability of the
+    ``extra_jitter_fwhm_ps``, lands ``k`` bins away with the probability of the
     box-convolved Gaussian over that bin.
 
     Returns
@@ -154,7 +154,7 @@ def jitter_kernel(fwhm_ps: float, bin_width_ps: float, *, cutoff_sigmas: float =
     """
     from scipy.special import erf
 
-    sigma = fwhm_ps / FWHM_PER_SIGMA / bin_width_ps  # in bins
+    sigma = sigma_of_fwhm(extra_jitter_fwhm_ps) / bin_width_ps  # in bins
     if sigma <= 0:
         return np.ones(1), 0
     half = max(1, int(math.ceil(cutoff_sigmas * sigma + 1)))
@@ -170,10 +170,10 @@ def jitter_kernel(fwhm_ps: float, bin_width_ps: float, *, cutoff_sigmas: float =
     return p / p.sum(), half
 
 
-def _jitter_expected(h: np.ndarray, fwhm_ps: float, bin_width_ps: float) -> np.ndarray:
+def _jitter_expected(h: np.ndarray, extra_jitter_fwhm_ps: float, bin_width_ps: float) -> np.ndarray:
     from nlosplan.sensor_models.pipeline import apply_jitter
 
-    return np.asarray(apply_jitter(np.asarray(h, np.float64), fwhm_ps, bin_width_ps))
+    return np.asarray(apply_jitter(np.asarray(h, np.float64), extra_jitter_fwhm_ps, bin_width_ps))
 
 
 def degrade_expected(mean: np.ndarray, d: Degradation) -> np.ndarray:

@@ -36,7 +36,9 @@ from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.binning import bin_boxes, bin_impulses
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.counts import deadtime_expected, sample_poisson, saturate
+from nlosplan.sensor_models.counts import deadtime_expected
+from nlosplan.sensor_models.impulse import sigma_of_fwhm
+from nlosplan.sensor_models.noise import CaptureNoise, floor_per_bin
 from nlosplan.sensor_models.zone_terms import apply_zone_terms_arrivals, walk_shift_ps, zone_values
 
 #: The exponential pulse tail is carried this many windows past the pulse (further light cannot land in the window).
@@ -109,7 +111,7 @@ def expected_counts(
     sigma_ps,
     photon_scale,
     iterations,
-    background_per_bin=0.0,
+    floor_per_bin=0.0,
     crosstalk=0.0,
     crosstalk_times_ps=0.0,
     pulse=None,
@@ -132,8 +134,8 @@ def expected_counts(
         Detected photons per iteration per unit weight.
     iterations : scalar
         Laser iterations per histogram.
-    background_per_bin : scalar or array broadcastable to (..., B)
-        Ambient + dark photons per iteration per bin.
+    floor_per_bin : scalar or array broadcastable to (..., B)
+        The floor (dark + ambient) in photons per iteration per bin (:func:`~nlosplan.sensor_models.noise.floor_per_bin`).
     crosstalk : scalar or array broadcastable to (..., 1)
         Crosstalk photons per iteration at zero optical path (per zone: after its gain).
     crosstalk_times_ps : scalar or array broadcastable to (..., 1)
@@ -160,11 +162,11 @@ def expected_counts(
         when = jnp.broadcast_to(jnp.asarray(crosstalk_times_ps, dtype), lam.shape[:-1] + (1,))
         xt = jnp.broadcast_to(jnp.asarray(crosstalk, dtype), lam.shape[:-1] + (1,))
         lam = lam + bin_arrivals(when, xt, edges_ps, sigma_ps, pulse)
-    return counts_from_rates(lam, iterations=iterations, background_per_bin=background_per_bin,
+    return counts_from_rates(lam, iterations=iterations, floor_per_bin=floor_per_bin,
                              pileup=pileup, max_count=max_count, spads=spads, dead_bins=dead_bins)
 
 
-def counts_from_rates(lam, *, iterations, background_per_bin=0.0, pileup: bool = False, max_count=None, spads=1,
+def counts_from_rates(lam, *, iterations, floor_per_bin=0.0, pileup: bool = False, max_count=None, spads=1,
                       dead_bins=None):
     """Expected recorded counts from binned photons per iteration.
 
@@ -174,10 +176,10 @@ def counts_from_rates(lam, *, iterations, background_per_bin=0.0, pileup: bool =
         Signal photons per iteration per bin (already through the impulse response).
     iterations : scalar
         Laser iterations per histogram.
-    background_per_bin : scalar or array broadcastable to (..., B)
-        Ambient + dark photons per iteration per bin.
+    floor_per_bin : scalar or array broadcastable to (..., B)
+        The floor (dark + ambient) in photons per iteration per bin (:func:`~nlosplan.sensor_models.noise.floor_per_bin`).
     pileup : bool
-        Apply flux-dependent detection (static); ambient and dark photons count toward it.
+        Apply flux-dependent detection (static); the floor's photons count toward it.
     max_count : int or None
         Clip expected counts here (24-bit saturation); None to skip.
     spads, dead_bins
@@ -188,8 +190,8 @@ def counts_from_rates(lam, *, iterations, background_per_bin=0.0, pileup: bool =
     array, shape (..., B)
     """
     dtype = lam.dtype
-    if not (isinstance(background_per_bin, (int, float)) and background_per_bin == 0):
-        lam = lam + jnp.asarray(background_per_bin, dtype)
+    if not (isinstance(floor_per_bin, (int, float)) and floor_per_bin == 0):
+        lam = lam + jnp.asarray(floor_per_bin, dtype)
     counts = deadtime_expected(lam, iterations, spads, dead_bins) if pileup else iterations * lam
     if max_count is not None:
         counts = jnp.minimum(counts, jnp.asarray(max_count, dtype))
@@ -199,12 +201,6 @@ def counts_from_rates(lam, *, iterations, background_per_bin=0.0, pileup: bool =
 def dead_bins(sensor: SensorConfig):
     """The sensor's dead time in bins, or None (blind for the rest of the iteration)."""
     return None if sensor.dead_time_ps is None else sensor.dead_time_ps / sensor.bin_width_ps
-
-
-def background_per_bin(sensor: SensorConfig, lights_on: bool) -> float:
-    """Ambient (if lights on) plus dark photons per iteration per bin."""
-    rate = sensor.dark_rate_hz + (sensor.ambient_rate_hz if lights_on else 0.0)
-    return rate * sensor.bin_width_ps * 1e-12
 
 
 def expected_histogram(sensor: SensorConfig, times_ps, weights, *, lights_on: bool = True, dtype=None):
@@ -270,10 +266,10 @@ def _expected(sensor: SensorConfig, t, w, lights_on: bool, crosstalk, crosstalk_
         t,
         w,
         edges_ps=jnp.asarray(sensor.bin_edges_ps(), dt),
-        sigma_ps=sensor.sigma_ps,
+        sigma_ps=sensor.impulse_sigma_ps,
         photon_scale=sensor.photon_scale,
         iterations=float(sensor.iterations),
-        background_per_bin=background_per_bin(sensor, lights_on),
+        floor_per_bin=floor_per_bin(sensor, lights_on),
         crosstalk=crosstalk,
         crosstalk_times_ps=crosstalk_times_ps,
         pulse=pulse_boxes(sensor),
@@ -284,29 +280,8 @@ def _expected(sensor: SensorConfig, t, w, lights_on: bool, crosstalk, crosstalk_
     )
 
 
-def sample_counts(key, mean, *, saturation: bool = True, max_count: int | None = None):
-    """Poisson-sample expected counts and apply the register clip.
-
-    Parameters
-    ----------
-    key : jax.random key
-    mean : array, shape (...)
-        Expected counts.
-    saturation : bool
-        Clip at ``max_count`` (24-bit by default).
-
-    Returns
-    -------
-    array of int64, shape (...)
-    """
-    counts = sample_poisson(key, mean)
-    if saturation:
-        counts = saturate(counts) if max_count is None else saturate(counts, max_count)
-    return counts
-
-
 def sample_histogram(key, sensor: SensorConfig, times_ps, weights, *, lights_on: bool = True, repeats: int = 1):
-    """Noisy histograms: expected counts, Poisson noise, saturation.
+    """Noisy histograms: expected counts, then captures drawn by the sensor's noise model (:class:`.noise.CaptureNoise`).
 
     Parameters
     ----------
@@ -326,10 +301,10 @@ def sample_histogram(key, sensor: SensorConfig, times_ps, weights, *, lights_on:
         key = jax.random.key(int(key))
     mean = expected_histogram(sensor, times_ps, weights, lights_on=lights_on)
     mean = jnp.broadcast_to(mean, (repeats,) + mean.shape)
-    return sample_counts(key, mean, saturation=sensor.saturation, max_count=sensor.max_count)
+    return CaptureNoise.of(sensor).draw(key, mean)
 
 
-def apply_jitter(histogram, fwhm_ps, bin_width_ps):
+def apply_jitter(histogram, extra_jitter_fwhm_ps, bin_width_ps):
     """Blur existing histograms with Gaussian timing jitter (DENALI's jitter study).
 
     Each bin is treated as a uniform box of its width and re-binned through a
@@ -340,7 +315,7 @@ def apply_jitter(histogram, fwhm_ps, bin_width_ps):
     ----------
     histogram : array, shape (..., B)
         Counts or expected counts.
-    fwhm_ps : float
+    extra_jitter_fwhm_ps : float
         Jitter FWHM, ps (0 returns the input unchanged).
     bin_width_ps : float
         Bin width, ps.
@@ -354,5 +329,5 @@ def apply_jitter(histogram, fwhm_ps, bin_width_ps):
     h = h.astype(dtype)
     n = h.shape[-1]
     edges = jnp.arange(n + 1, dtype=dtype) * bin_width_ps
-    sigma = jnp.asarray(fwhm_ps, dtype) / 2.3548200450309493
+    sigma = sigma_of_fwhm(jnp.asarray(extra_jitter_fwhm_ps, dtype))
     return bin_boxes(edges[:-1], bin_width_ps, h, edges, sigma)

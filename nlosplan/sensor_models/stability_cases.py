@@ -15,7 +15,8 @@ from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.binning import bin_boxes, bin_impulses
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.counts import coates_correction, pileup_expected, sample_poisson
+from nlosplan.sensor_models.counts import coates_correction, pileup_expected
+from nlosplan.sensor_models.noise import sample_poisson
 from nlosplan.sensor_models.pipeline import apply_jitter, expected_histogram, sample_histogram
 from nlosplan.sensor_models.presets import preset
 from nlosplan.cases import Case
@@ -119,9 +120,9 @@ def _gradients():
 
     t = jnp.array([3000.0, 3100.0])
     g_t0 = jax.grad(total, argnums=(0, 1))(t, 0.0)
-    g_t1 = jax.grad(total, argnums=(0, 1))(t, s.sigma_ps)
+    g_t1 = jax.grad(total, argnums=(0, 1))(t, s.impulse_sigma_ps)
     vals = np.concatenate([np.ravel(np.asarray(x)) for x in (*g_t0, *g_t1)])
-    return bool(np.all(np.isfinite(vals))), f"{vals.size} gradient entries finite (sigma 0 and {s.sigma_ps:.0f} ps)"
+    return bool(np.all(np.isfinite(vals))), f"{vals.size} gradient entries finite (sigma 0 and {s.impulse_sigma_ps:.0f} ps)"
 
 
 def _jitter_on_histograms():

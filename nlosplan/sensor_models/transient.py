@@ -55,7 +55,7 @@ def irf_extent_ps(sensor: SensorConfig, sigma_ps: float | None = None) -> tuple[
     sigma_ps : float, optional
         Gaussian sigma to assume (default: the sensor's).
     """
-    sigma = sensor.sigma_ps if sigma_ps is None else float(sigma_ps)
+    sigma = sensor.impulse_sigma_ps if sigma_ps is None else float(sigma_ps)
     lo = hi = 0.0
     pulse = pulse_boxes(sensor)
     if pulse is not None:

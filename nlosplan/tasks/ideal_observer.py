@@ -27,9 +27,9 @@ from scipy import stats
 
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.simulators.fast.simulator import FastSimulator
+from nlosplan.sensor_models.noise import CaptureNoise
 from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES
-from nlosplan.simulators.presets.denali import denali_scene
+from nlosplan.simulators import denali_scene, expected_batch
 from nlosplan.tasks.bounds import fidelity_label
 
 __all__ = ["TASKS", "RULES", "IdealObserverResult", "binomial_interval", "ideal_observer", "observer_accuracy"]
@@ -166,7 +166,8 @@ def _draw_plan(rng, class_of, n_pos, draws):
 
 
 def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bool = False, rule: str = "marginal",
-                      same_group=None, noise: bool = True, max_count: int | None = None, confidence: float = 0.95,
+                      same_group=None, noise: bool = True, capture_noise: CaptureNoise | None = None,
+                      confidence: float = 0.95,
                       ci_method: str = "wilson", class_names=None, chunk_bytes: int = 1 << 27,
                       precision: str = "float32", stop_at=None, looks: int = 4, stop_confidence: float = 0.999,
                       progress=None) -> dict:
@@ -193,9 +194,10 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         The observer is told the truth's group (e.g. its shape in the size
         task) and considers only hypotheses of that group.
     noise : bool
-        Poisson counts (True) or the expectation itself (``y = lam``).
-    max_count : int, optional
-        Clip the counts here (the sensor's 24-bit saturation).
+        Noisy captures (True) or the expectation itself (``y = lam``).
+    capture_noise : CaptureNoise, optional
+        How the captures are drawn (:meth:`CaptureNoise.of(sensor) <nlosplan.sensor_models.noise.CaptureNoise.of>`:
+        Poisson, clipped at the sensor's 24-bit maximum); default Poisson without a clip.
     confidence, ci_method
         See :func:`binomial_interval`.
     class_names : sequence of str, optional
@@ -265,6 +267,7 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         raise UserError("class_of must use every class index 0..C-1")
     group = None if same_group is None else np.asarray(same_group)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    draw = (capture_noise or CaptureNoise()).draw
     truth_h, truth_p = _draw_plan(rng, class_of, n_p, int(draws))
     starts = [0]  # where each round begins in the draw order
     if stops:  # stratified rounds: round k holds the k-th slice of every class's draws
@@ -311,9 +314,7 @@ def observer_accuracy(means, class_of, *, draws: int, seed=0, position_known: bo
         th, tp = truth_h[start:stop], truth_p[start:stop]
         y = lam_obs[th, tp]
         if noise:
-            y = rng.poisson(y).astype(np.float64)
-            if max_count is not None:
-                y = np.minimum(y, max_count)
+            y = draw(rng, y).astype(np.float64)
         if precision == "float32":
             ll = (((y - centre).astype(np.float32) @ log_lam.T) - total).reshape(-1, n_h, n_p)  # float64 (m, H, P)
         else:
@@ -413,7 +414,7 @@ def ideal_observer(task: str, sensor: SensorConfig, *, objects=None, size: str =
     Notes
     -----
     The expected counts of every (object, size, position) come from one
-    batched :class:`~nlosplan.simulators.FastSimulator` in float64; the
+    batch of the fast backend in float64 (:func:`~nlosplan.simulators.expected_batch`); the
     classification is :func:`observer_accuracy`.
     """
     t0 = time.perf_counter()
@@ -437,16 +438,16 @@ def ideal_observer(task: str, sensor: SensorConfig, *, objects=None, size: str =
     pos = _positions(positions)
     kw = dict(scene_kw or {})
     scenes = [denali_scene(o, s, p, lights, **kw) for o, s in hyps for p in pos]
-    sim = FastSimulator(scenes, sensor, fidelity=fidelity, dtype="float64")
-    means = np.asarray(sim.expected()).reshape(len(hyps), len(pos), -1)
+    batch = expected_batch(scenes, sensor, fidelity=fidelity, dtype="float64")
+    means = np.asarray(batch.expected).reshape(len(hyps), len(pos), -1)
     t_sim = time.perf_counter() - t0
     if progress is not None:
         progress("simulation", len(scenes), len(scenes))
     out = observer_accuracy(means, class_of, draws=draws, seed=seed, position_known=position_known, rule=rule,
-                            same_group=group, noise=noise, max_count=sensor.max_count if sensor.saturation else None,
+                            same_group=group, noise=noise, capture_noise=CaptureNoise.of(sensor),
                             confidence=confidence, ci_method=ci_method, class_names=class_names,
                             progress=None if progress is None else (lambda d, t: progress("draws", d, t)))
-    fid = sim.plan.fidelity
+    fid = batch.fidelity
     meta = {"sensor": sensor.name, "lights": lights, "size": size if task == "shape" else list(SIZES),
             "objects": objs, "positions": pos, "shape_known": bool(shape_known) if task == "size" else None,
             "noise": bool(noise), "zones": f"{sensor.zones_rows}x{sensor.zones_cols}", "n_bins": sensor.n_bins}

@@ -12,10 +12,10 @@ from typing import Sequence
 
 from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, real as real_bench, rig as rig_bench
 
-from nlosplan.cli.dataset import _choices, _objects
+from nlosplan.cli.selections import choice_list, object_list
 from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
-from nlosplan.simulators.fast.bench import (
+from nlosplan.simulators.bench import (
     DEFAULT_LEVELS,
     DEFAULT_OBJECTS,
     DEFAULT_PLOT,
@@ -59,13 +59,6 @@ def _int_list(text: str) -> list[int]:
     return out
 
 
-def _name_list(text: str) -> list[str]:
-    out = [v.strip() for v in text.split(",") if v.strip()]
-    if not out:
-        raise argparse.ArgumentTypeError("give at least one name")
-    return out
-
-
 def _position_list(text: str) -> list[int]:
     out = _int_list(text)
     bad = [p for p in out if not 0 <= p < N_POSITIONS]
@@ -93,10 +86,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--reference-positions", type=_position_list, default=None, metavar="P,P,...",
                         help="positions of the float64 reference (~10-20 s each; default: "
                              f"{','.join(map(str, DEFAULT_REFERENCE_POSITIONS))}, those among the first N)")
-    parser.add_argument("--objects", type=_objects, default=list(DEFAULT_OBJECTS), metavar="A,S,...",
+    parser.add_argument("--objects", type=object_list, default=list(DEFAULT_OBJECTS), metavar="A,S,...",
                         help="DENALI objects of the mixed batch; position p holds object p mod their number "
                              f"(default: {','.join(DEFAULT_OBJECTS)})")
-    parser.add_argument("--sizes", type=_choices(("4in", "8in")), default=list(DEFAULT_SIZES), metavar="8in,4in",
+    parser.add_argument("--sizes", type=choice_list(("4in", "8in")), default=list(DEFAULT_SIZES), metavar="8in,4in",
                         help=f"sizes, changing every len(objects) positions (default: {','.join(DEFAULT_SIZES)})")
     parser.add_argument("--sensor", default="tmf8828-3x3-short", help="preset name or sensor file (default: %(default)s)")
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"],

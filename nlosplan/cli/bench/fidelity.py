@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from nlosplan.cli.common import emit, int_type, note, progress_bar
-from nlosplan.cli.dataset import _choices, _objects
+from nlosplan.cli.selections import choice_list, object_list
 
 FIDELITY_DESCRIPTION = """\
 Error against run time of both simulators on DENALI 3x3 (Lambertian objects
@@ -31,7 +31,7 @@ minutes per model for 60 cases on 2 cores. JSON: {"cases": [{"model",
 
 def _cmd_fidelity(args) -> int:
     from nlosplan.files import check_plot_path
-    from nlosplan.simulators.mitsuba.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
+    from nlosplan.simulators.bench import FAST_LEVELS, TWIN_LEVELS, bench_fidelity, format_bench_fidelity
 
     if args.plot:
         check_plot_path(args.plot, "--plot")
@@ -55,9 +55,7 @@ def _cmd_fidelity(args) -> int:
 
 
 def _cmd_crossval(args) -> int:
-    from nlosplan.simulators.mitsuba.crossval import cross_validate, format_table
-
-    from nlosplan.simulators.mitsuba.crossval import check_models
+    from nlosplan.simulators.bench import check_models, cross_validate, format_table
 
     models = check_models(m.strip() for m in args.models.split(",") if m.strip())
     objects, sizes = args.objects, args.sizes
@@ -95,9 +93,9 @@ def add_bench(bsub) -> None:
                 "nlosplan bench crossval --models lambertian,mixed,mount --objects A,circle,3 --positions 10 --json")
     c.add_argument("--models", default="lambertian,mixed,mount",
                    help="reflectance models, comma-separated: lambertian, mixed, mount (default: %(default)s)")
-    c.add_argument("--objects", type=_objects, default=["A", "circle", "3"], metavar="A,S,...",
+    c.add_argument("--objects", type=object_list, default=["A", "circle", "3"], metavar="A,S,...",
                    help="DENALI objects (default: A,circle,3)")
-    c.add_argument("--sizes", type=_choices(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
+    c.add_argument("--sizes", type=choice_list(("4in", "8in")), default=["4in", "8in"], metavar="4in,8in",
                    help="sizes (default: 4in,8in)")
     c.add_argument("--positions", type=int_type(1, 100), default=10,
                    help="gantry positions, evenly spaced over 0..99 (default: %(default)s)")

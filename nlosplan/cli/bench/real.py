@@ -21,7 +21,7 @@ EXAMPLE = "nlosplan bench real --json"
 
 def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=None) -> dict:
     """The plane check: cross-validated per-zone scores (``{"zones": [...], "summary", "targets", ...}``)."""
-    from nlosplan.cli.calibrate_plane import plane_arrivals
+    from nlosplan.calibration.workflow import plane_arrivals
     from nlosplan.reports.realism_table import plane_summary
     from nlosplan.sensor_models import resolve_sensor
     from nlosplan.calibration.plane_cv import cross_validate

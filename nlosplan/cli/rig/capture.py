@@ -346,14 +346,15 @@ def resolve_devices(args, *, seed_is_noise: bool) -> dict:
 def _open(args, devices: dict):
     """The rig of the command line (:func:`nlosplan.hardware.rig.rig_session`), a context manager."""
     from nlosplan.hardware.lights import FixedLights
-    from nlosplan.hardware.rig import rig_session
+    from nlosplan.hardware.rig import RigOptions, rig_session
 
     park = None if args.no_park else (args.limits[0][0], args.limits[1][0])
-    return rig_session(**devices, zones=args.zones, range_mode=args.range_mode,
-                       baudrate=args.baud or 2_000_000, sensor_config=args.sensor_config, limits_mm=args.limits,
-                       feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"), lights_on=args.lights == "on",
-                       home=args.home, unlock=args.unlock, park_mm=park, obj=args.object, size=args.size,
-                       seed=args.seed or 0, time_scale=args.time_scale or 20.0)
+    return rig_session(RigOptions(**devices, zones=args.zones, range_mode=args.range_mode,
+                                  baudrate=args.baud or 2_000_000, sensor_config=args.sensor_config,
+                                  limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
+                                  lights_on=args.lights == "on", home=args.home, unlock=args.unlock, park_mm=park,
+                                  obj=args.object, size=args.size, seed=args.seed or 0,
+                                  time_scale=args.time_scale or 20.0))
 
 
 def add_device_options(p: argparse.ArgumentParser, *, seed_help: str) -> None:

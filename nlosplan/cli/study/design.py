@@ -30,7 +30,7 @@ def _cmd(args) -> int:
 
 def add_study(ssub) -> None:
     """``study resolution`` and ``study bins``."""
-    from nlosplan.cli.design import _requirement
+    from nlosplan.cli.design import requirement_type
     from nlosplan.experiments.design_studies import DESIGN_STUDIES
 
     for name, (_, what) in DESIGN_STUDIES.items():
@@ -39,7 +39,7 @@ def add_study(ssub) -> None:
                                    "(TOML in nlosplan/experiments/) and writes its report: the metric of every task "
                                    "against the axis, the least hardware that meets each requirement, Pareto fronts.")
         p.add_argument("--quick", action="store_true", help="the quick run's scenes and grids (about a minute)")
-        p.add_argument("--requirement", action="append", type=_requirement, metavar="REQ",
+        p.add_argument("--requirement", action="append", type=requirement_type, metavar="REQ",
                        help="as in nlosplan design, e.g. loc<=0.05 (replaces the defaults)")
         p.add_argument("--out", metavar="DIR", help=f"output folder (default: nlosplan-out/study_{name})")
         p.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")

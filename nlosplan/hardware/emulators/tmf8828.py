@@ -23,6 +23,7 @@ import numpy as np
 from nlosplan.hardware.emulators.faults import SensorFaults, garble, truncate
 from nlosplan.hardware.emulators.pty import PtyDevice
 from nlosplan.hardware.tmf8828_protocol import MAX_COUNT, N_BINS, ZoneMode, dump_lines, frame_dumps, obj_line
+from nlosplan.sensor_models.noise import CaptureNoise
 
 __all__ = ["EmulatedTMF8828"]
 
@@ -157,8 +158,8 @@ class EmulatedTMF8828(PtyDevice):
     def _emit_frame(self) -> None:
         zones = self.zones
         mean, bin_ps = self.expected(zones.value, "short" if self.short_range else "long")
-        counts = np.minimum(self.rng.poisson(np.maximum(mean, 0.0)), MAX_COUNT)
-        ref = self.rng.poisson(_REF)
+        counts = CaptureNoise(MAX_COUNT).draw(self.rng, mean)  # the sensor's noise model: Poisson, 24-bit clip
+        ref = CaptureNoise().draw(self.rng, _REF)
         dumps = frame_dumps(counts, zones, ref)
         peak = np.argmax(counts.reshape(-1, N_BINS), axis=1)
         flat_dist = np.rint((peak + 0.5) * bin_ps * C_MM_PER_PS).astype(np.int64)

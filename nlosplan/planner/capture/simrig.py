@@ -5,7 +5,8 @@ The truth differs from the planner's nominal model: the object sits
 error), the photon scale and the object albedo are scaled by ``exp`` of
 their log-factors. The truth's expected counts are simulated exactly (not
 through the planner's first-order model); each observation is the mean of
-``repeats`` Poisson captures.
+``repeats`` captures drawn by the sensor's noise model
+(:class:`~nlosplan.sensor_models.noise.CaptureNoise`: Poisson, 24-bit clip).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.planner.capture.motion import MotionModel
 from nlosplan.sensor_models.config import SensorConfig
+from nlosplan.sensor_models.noise import CaptureNoise
 
 __all__ = ["SimulatedRig", "build_simulated_rig", "true_scene"]
 
@@ -51,6 +53,8 @@ class SimulatedRig:
     theta_true : ndarray, shape (4,)
     repeats : int
     motion : MotionModel
+    noise : CaptureNoise
+        How a capture is drawn from its expected counts (default: Poisson without the clip).
     """
 
     truth: np.ndarray
@@ -59,17 +63,16 @@ class SimulatedRig:
     theta_true: np.ndarray
     repeats: int
     motion: MotionModel
+    noise: CaptureNoise = CaptureNoise()
 
     def observe(self, index, rng) -> np.ndarray:
-        """Mean of ``repeats`` Poisson captures at candidate(s) ``index``, shape (len(index), K)."""
+        """Mean of ``repeats`` captures at candidate(s) ``index``, shape (len(index), K) (:attr:`noise`)."""
         lam = self.truth[np.atleast_1d(np.asarray(index, dtype=int))]
-        return rng.poisson(np.broadcast_to(lam, (self.repeats,) + lam.shape)).mean(axis=0)
+        return self.noise.mean_of_repeats(rng, lam, self.repeats)
 
     def test_set(self, seed: int = 12345) -> np.ndarray:
         """Fixed noisy test observations, shape (T, K) (the same for every strategy and run)."""
-        rng = np.random.default_rng(seed)
-        lam = self.test_truth
-        return rng.poisson(np.broadcast_to(lam, (self.repeats,) + lam.shape)).mean(axis=0)
+        return self.noise.mean_of_repeats(np.random.default_rng(seed), self.test_truth, self.repeats)
 
 
 def build_simulated_rig(space, sensor: SensorConfig, theta_true, test_points_mm, *, scene_fn=None,
@@ -95,7 +98,7 @@ def build_simulated_rig(space, sensor: SensorConfig, theta_true, test_points_mm,
     SimulatedRig
     """
     from nlosplan.planner.capture.space import denali_scene_fn
-    from nlosplan.simulators import FastSimulator
+    from nlosplan.simulators import expected_batch
 
     th = np.asarray(theta_true, dtype=np.float64).reshape(4)
     scene_fn = scene_fn or denali_scene_fn()
@@ -104,9 +107,9 @@ def build_simulated_rig(space, sensor: SensorConfig, theta_true, test_points_mm,
     nominal = [scene_fn(float(x), float(y)) for x, y in pts]
     scenes = [true_scene(s, th) for s in nominal]
     true_sensor = sensor.replace(photon_scale=sensor.photon_scale * float(np.exp(th[2])))
-    lam = FastSimulator(scenes, true_sensor, fidelity=fidelity, dtype="float64", chunk=chunk).expected()
+    lam = expected_batch(scenes, true_sensor, fidelity=fidelity, dtype="float64", chunk=chunk).expected
     lam = np.asarray(lam, dtype=np.float64).reshape(len(pts), -1)
     c = space.size
     labels = np.array([s.meta.get("object_xy", [np.nan, np.nan])[:2] for s in nominal[c:]], dtype=np.float64)
     return SimulatedRig(truth=lam[:c], test_truth=lam[c:], test_labels=labels.reshape(-1, 2), theta_true=th,
-                        repeats=space.repeats, motion=motion or MotionModel())
+                        repeats=space.repeats, motion=motion or MotionModel(), noise=CaptureNoise.of(true_sensor))

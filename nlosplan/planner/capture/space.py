@@ -2,16 +2,16 @@
 
 For each candidate gantry position the nominal simulator gives the
 expected counts split into parts (first bounce ``direct``, hidden
-``object``, ``background``: ambient and dark) and the derivative of the
+``object``, ``floor``: dark and ambient) and the derivative of the
 counts with respect to a world (x, y) shift of the object
-(:func:`~nlosplan.tasks.bounds.counts_and_jacobian`, central differences of
+(:func:`~nlosplan.simulators.counts_and_jacobian`, central differences of
 the fast simulator in float64). The calibration parameters are
 
 ``theta = (dx, dy, log g, log a)``: a registration offset of the gantry in
 the world (m), the photon scale factor ``g`` and the object albedo factor
 ``a``; the counts model is
 
-``lam(theta) = background + g (direct + a (object + J_xy (dx, dy)))``,
+``lam(theta) = floor + g (direct + a (object + J_xy (dx, dy)))``,
 
 exact in ``g`` and ``a`` (lights off, no pile-up) and first order in the
 offset.
@@ -58,7 +58,7 @@ class CandidateSpace:
         Gantry positions, mm.
     labels_xy : ndarray, shape (C, 2)
         Localization labels (world x, y), m.
-    direct, object, background : ndarray, shape (C, K)
+    direct, object, floor : ndarray, shape (C, K)
         Parts of the expected counts, ``K = zones * bins``.
     jac_xy : ndarray, shape (C, K, 2)
         ``d counts / d (x, y)`` of a world shift of the object, counts per metre.
@@ -76,7 +76,7 @@ class CandidateSpace:
     labels_xy: np.ndarray
     direct: np.ndarray
     object: np.ndarray
-    background: np.ndarray
+    floor: np.ndarray
     jac_xy: np.ndarray
     shape: tuple
     repeats: int = 3
@@ -98,7 +98,7 @@ class CandidateSpace:
         idx = slice(None) if index is None else np.asarray(index, dtype=int)
         g, a = np.exp(th[2]), np.exp(th[3])
         obj = self.object[idx] + self.jac_xy[idx] @ th[:2]
-        return np.maximum(self.background[idx] + g * (self.direct[idx] + a * obj), 0.0)
+        return np.maximum(self.floor[idx] + g * (self.direct[idx] + a * obj), 0.0)
 
     def jacobian(self, theta=None, index=None) -> np.ndarray:
         """``d counts / d theta``, shape (C or len(index), K, 4)."""
@@ -142,8 +142,7 @@ def build_space(points_mm, sensor: SensorConfig, *, scene_fn=None, fidelity="dra
     -------
     CandidateSpace
     """
-    from nlosplan.simulators import FastSimulator
-    from nlosplan.tasks.bounds import counts_and_jacobian
+    from nlosplan.simulators import counts_and_jacobian, expected_batch
 
     t0 = time.perf_counter()
     pts = np.asarray(points_mm, dtype=np.float64).reshape(-1, 2)
@@ -157,15 +156,14 @@ def build_space(points_mm, sensor: SensorConfig, *, scene_fn=None, fidelity="dra
         raise UserError("the capture planner's counts model assumes lights off (ambient is not calibrated)")
     if sensor.pileup:
         raise UserError("the capture planner's counts model assumes no pile-up (a linear counts model)")
-    sim = FastSimulator(scenes, sensor, fidelity=fidelity, dtype="float64", chunk=chunk)
-    parts = sim.expected(parts=True)
+    batch = expected_batch(scenes, sensor, fidelity=fidelity, dtype="float64", chunk=chunk, parts=True)
     c = len(pts)
-    flat = {k: np.asarray(v, dtype=np.float64).reshape(c, -1) for k, v in parts.items()}
+    flat = {k: np.asarray(v, dtype=np.float64).reshape(c, -1) for k, v in batch.parts.items()}
     _, jac, _, _ = counts_and_jacobian(scenes, sensor, fidelity=fidelity, nuisance=(), chunk=chunk)
-    hist_shape = tuple(np.asarray(parts["counts"]).shape[1:])
+    hist_shape = tuple(np.asarray(batch.expected).shape[1:])
     return CandidateSpace(
         points_mm=pts, labels_xy=_labels(scenes), direct=flat["direct"] + flat.get("crosstalk", 0.0),
-        object=flat["object"], background=flat["background"], jac_xy=jac.reshape(c, -1, 2), shape=hist_shape,
+        object=flat["object"], floor=flat["floor"], jac_xy=jac.reshape(c, -1, 2), shape=hist_shape,
         repeats=int(repeats), excluded=list(excluded),
         meta={"sensor": sensor.name, "fidelity": fidelity if isinstance(fidelity, str) else "custom",
               "scene": scenes[0].name, "seconds": time.perf_counter() - t0})

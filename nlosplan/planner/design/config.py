@@ -85,7 +85,7 @@ def quick_config() -> DesignConfig:
 def _schema() -> dict:
     """What each key of a design TOML must hold (checked when the file is read, before any work)."""
     from nlosplan.denali import DENALI_OBJECTS, SIZES
-    from nlosplan.simulators.fast.fidelity import FIDELITY_LEVELS
+    from nlosplan.simulators import BACKENDS, FIDELITY_LEVELS
 
     zone = Spec('a zone grid such as "3x3"', parse_zones)  # a UserError of parse_zones marks a bad value
     objects = list_of(predicate('a DENALI object such as "A" or "circle"', lambda v: v in DENALI_OBJECTS), min_len=1)
@@ -105,7 +105,7 @@ def _schema() -> dict:
         "scenes": {"objects": objects, "sizes": list_of(one_of(*SIZES), min_len=1),
                    "positions": list_of(int_in(0, 99), min_len=1), "positions_stride": int_in(1, 99),
                    "lights": one_of("off", "on"), "repeats": count, "crlb_objects": objects, "crlb_stride": count,
-                   "fidelity": one_of(*FIDELITY_LEVELS), "backend": one_of("fast", "mitsuba")},
+                   "fidelity": one_of(*FIDELITY_LEVELS), "backend": one_of(*BACKENDS)},
     }
 
 

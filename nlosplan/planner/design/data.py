@@ -26,6 +26,7 @@ from nlosplan.errors import UserError
 from nlosplan.files import atomic_path
 from nlosplan.sensor_models import SensorConfig
 from nlosplan.sensor_models.degrade import Degradation, degrade_counts, degrade_expected, degrade_linear, reach
+from nlosplan.sensor_models.noise import CaptureNoise
 
 __all__ = ["SceneSet", "ReferenceData", "simulate_reference", "reference_from_dataset", "load_reference",
            "build_reference"]
@@ -54,8 +55,9 @@ class SceneSet:
     crlb_stride : int
     fidelity : str
         Simulator level of the reference histograms.
-    backend : {"fast", "mitsuba"}
-        Simulator of the reference histograms: the fast JAX backend, or the Mitsuba 3 twin (about
+    backend : str
+        Simulator of the reference histograms, from :data:`nlosplan.simulators.BACKENDS`: the fast JAX backend, or
+        the Mitsuba 3 twin (about
         0.1 s per scene and zone layout on 2 cores; it measures the relay wall only). The bound
         scenes' Jacobians always come from the fast backend (the twin is not differentiated here).
     scene_kwargs : tuple of (str, float or bool)
@@ -81,8 +83,9 @@ class SceneSet:
     model: str = ""
 
     def __post_init__(self) -> None:
-        if self.backend not in ("fast", "mitsuba"):
-            raise UserError(f"unknown simulation backend {self.backend!r}; allowed: fast, mitsuba")
+        from nlosplan.simulators import check_backend
+
+        check_backend(self.backend)
         kw = self.scene_kwargs.items() if isinstance(self.scene_kwargs, dict) else self.scene_kwargs
         object.__setattr__(self, "scene_kwargs", tuple(sorted(
             (str(k), bool(v) if isinstance(v, bool) else float(v)) for k, v in kw)))
@@ -178,28 +181,13 @@ class ReferenceData:
     def design_mean_capture(self, d: Degradation, rng, repeats: int) -> np.ndarray:
         """The mean of ``repeats`` noisy captures of the design, (N, R', C', B') float64 (real: the capture rows).
 
-        Simulated: drawn as one Poisson sum per bin, ``S ~ Poisson(repeats * lam)``, divided by ``repeats`` --
-        the same distribution as the mean of ``repeats`` independent Poisson captures (clipped at saturation) at a
-        ``1 / repeats`` of the draws. With saturation, a sum above the sensor's ``max_count`` is split into its
-        captures (multinomially: given the sum, that is their joint law) and each clipped first, so it stays exact.
+        Simulated: the reference sensor's :meth:`~nlosplan.sensor_models.noise.CaptureNoise.mean_of_repeats` of the
+        design's expected counts.
         """
         rng = np.random.default_rng(rng)
         if self.means is None:
             return degrade_counts(self.counts, d, rng).astype(np.float64)
-        lam = degrade_expected(self.means, d)
-        total = rng.poisson(repeats * lam.astype(np.float64))
-        if self.sensor.saturation and repeats > 1 and np.any(total > self.sensor.max_count):
-            over = np.flatnonzero(total > self.sensor.max_count)
-            left, clipped = total.reshape(-1)[over], np.zeros(over.size, np.int64)
-            for k in range(repeats, 1, -1):  # one capture's share of what is left, then the rest
-                part = rng.binomial(left, 1.0 / k)
-                clipped += np.minimum(part, self.sensor.max_count)
-                left = left - part
-            clipped += np.minimum(left, self.sensor.max_count)
-            total.reshape(-1)[over] = clipped
-        elif self.sensor.saturation:
-            total = np.minimum(total, self.sensor.max_count)
-        return total / float(repeats)
+        return CaptureNoise.of(self.sensor).mean_of_repeats(rng, degrade_expected(self.means, d), repeats)
 
     def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:
         """``(lam, jac)`` of the localization-bound scenes under the design."""
@@ -244,19 +232,8 @@ def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(REFERENCE_COLUMNS))
 
 
-def _twin_expected(scene, sensor: SensorConfig, fidelity: str) -> np.ndarray:
-    import warnings
-
-    from nlosplan.simulators import expected_histogram
-    from nlosplan.simulators.scene import NLOSWarning
-
-    with warnings.catch_warnings():  # "relay wall only" is said once in the report, not per scene
-        warnings.simplefilter("ignore", NLOSWarning)
-        return expected_histogram(scene, sensor, backend="mitsuba", fidelity=fidelity)
-
-
 def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None) -> ReferenceData:
-    """Simulate the reference histograms of one zone layout with the fast backend.
+    """Simulate the reference histograms of one zone layout (the scene set's backend; the bound scenes: fast).
 
     Parameters
     ----------
@@ -272,33 +249,25 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
         ``means`` (N, R, C, B) for N = objects x sizes x positions and the
         localization-bound scenes' ``crlb_lam``, ``crlb_jac``.
     """
-    from nlosplan.simulators import FastSimulator, denali_scene
-    from nlosplan.tasks.bounds import counts_and_jacobian
+    from nlosplan.simulators import counts_and_jacobian, denali_scene, expected_batch
 
     t0 = time.perf_counter()
     labels = _scene_labels(scenes.objects, scenes.sizes, scenes.positions, scenes.lights)
     kw = scenes.options()
-    means = []
-    if scenes.backend == "mitsuba":
-        for obj in scenes.objects:  # one object at a time, a progress step each
-            batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw) for s in scenes.sizes for p in scenes.positions]
-            means.append(np.stack([_twin_expected(sc, sensor, scenes.fidelity) for sc in batch]).astype(np.float32))
-            if progress:
-                progress(f"{sensor.zones_rows}x{sensor.zones_cols} {obj}")
-    else:
-        # every object in one batch: one plan and one compiled simulator for all of them (a batch per object
-        # compiled again for each object's padding sizes), and a gantry mount the same under every object at a
-        # position is simulated once per position (FastSimulator's ``share``), not once per object and size
-        batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw)
-                 for obj in scenes.objects for s in scenes.sizes for p in scenes.positions]
-        step = None
-        if progress:
-            step = lambda done, total: progress(  # noqa: E731
-                f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
-        means.append(np.asarray(FastSimulator(batch, sensor, fidelity=scenes.fidelity).expected(progress=step),
-                                np.float32))
+    # every object in one batch: the fast backend runs one plan and one compiled simulator for all of them (a batch
+    # per object compiled again for each object's padding sizes), and a gantry mount the same under every object at
+    # a position is simulated once per position, not once per object and size; the twin renders them in turn
+    batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw)
+             for obj in scenes.objects for s in scenes.sizes for p in scenes.positions]
+    step = None
+    if progress:
+        step = lambda done, total: progress(  # noqa: E731
+            f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
+    # the twin's "relay wall only" is said once in the report, not per scene: its warnings are not repeated here
+    means = np.asarray(expected_batch(batch, sensor, backend=scenes.backend, fidelity=scenes.fidelity,
+                                      progress=step).expected, np.float32)
     if not scenes.crlb_objects:
-        return ReferenceData(sensor, labels, means=np.concatenate(means), source=scenes.backend,
+        return ReferenceData(sensor, labels, means=means, source=scenes.backend,
                              seconds=time.perf_counter() - t0)
     crlb_pos = scenes.positions[:: scenes.crlb_stride]
     crlb_scenes = [denali_scene(o, s, p, lights=scenes.lights, **kw) for o in scenes.crlb_objects
@@ -309,7 +278,7 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
     jac = jac.reshape(len(crlb_scenes), r, c, lam.shape[-1], -1)
     if progress:
         progress(f"{r}x{c} bound scenes")
-    return ReferenceData(sensor, labels, means=np.concatenate(means), crlb_lam=lam, crlb_jac=jac,
+    return ReferenceData(sensor, labels, means=means, crlb_lam=lam, crlb_jac=jac,
                          crlb_labels=_scene_labels(scenes.crlb_objects, scenes.sizes, crlb_pos, scenes.lights),
                          source=scenes.backend, seconds=time.perf_counter() - t0)
 

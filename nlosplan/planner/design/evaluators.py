@@ -49,6 +49,7 @@ from nlosplan.planner.design.evaluation import Evaluator, Status
 from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import METRIC_OF_TASK, Condition, Task
 from nlosplan.planner.design.worlds import world_sensor
+from nlosplan.sensor_models.noise import CaptureNoise
 
 __all__ = ["evaluate", "trained_metric", "DEFAULT_FIDELITY"]
 
@@ -107,7 +108,7 @@ def _observer(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[flo
     if len(classes) < 2:
         return math.nan, (math.nan, math.nan), {}
     res = observer_accuracy(cube, np.asarray(class_of), draws=int(fid["draws"]), seed=seed,
-                            max_count=ref.sensor.max_count if ref.sensor.saturation else None,
+                            capture_noise=CaptureNoise.of(ref.sensor),
                             stop_at=fid.get("stop_at") or None, looks=int(fid.get("looks", 1)))
     return (float(res["accuracy"]), tuple(float(v) for v in res["ci"]),
             {"draws": res["draws"], "stopped_early": res["stopped_early"]})

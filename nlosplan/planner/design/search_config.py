@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 from nlosplan.errors import UserError
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
+from nlosplan.resources import MAX_DESIGN_SEED as MAX_SEED
 
 __all__ = ["SearchConfig", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
 
-#: The largest run seed (``--seed``): evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``),
-#: and they must stay below 2**32, scikit-learn's limit on the split's ``random_state``.
-MAX_SEED = 1_000_000
+#: Evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``); the run's seed is at most
+#: ``MAX_SEED`` (:data:`nlosplan.resources.MAX_DESIGN_SEED`, defined once there), so they stay below 2**32.
 SEED_STRIDE = 1000
 #: Candidate learners of the trained evaluator (the best per task is used).
 DEFAULT_MODELS = ("mlp", "cnn1d")

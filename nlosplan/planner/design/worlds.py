@@ -40,6 +40,7 @@ import numpy as np
 
 from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models import SensorConfig
+from nlosplan.sensor_models.impulse import in_quadrature
 
 __all__ = ["WorldRange", "WorldsConfig", "World", "default_ranges", "scene_parameters", "sensor_parameters",
            "draw_worlds", "world_sensor", "BLUR_FIELDS"]
@@ -339,5 +340,5 @@ def world_sensor(design, reference: SensorConfig, overrides: dict | None) -> Sen
     overrides = overrides or {}
     plain = {k: v for k, v in overrides.items() if k not in BLUR_FIELDS}
     s = design.sensor(reference.replace(**plain) if plain else reference)
-    blur = {k: math.hypot(getattr(s, k), overrides[k]) for k in BLUR_FIELDS if k in overrides}
+    blur = {k: in_quadrature(getattr(s, k), overrides[k]) for k in BLUR_FIELDS if k in overrides}
     return s.replace(**blur) if blur else s

@@ -8,8 +8,9 @@ import warnings
 import numpy as np
 
 from nlosplan.errors import UserError
+from nlosplan.simulators.fast.jacobian import counts_and_jacobian
 from nlosplan.simulators.fast.simulator import FastSimulator
-from nlosplan.simulators.result import SimulationResult, assemble_result
+from nlosplan.simulators.result import BatchResult, CountsJacobian, SimulationResult, assemble_result
 from nlosplan.simulators.scene import NLOSWarning
 
 __all__ = ["FastBackend"]
@@ -46,3 +47,22 @@ class FastBackend:
         out = sim.expected(parts=True)
         return assemble_result(sim, out, FastSimulator(scene.without_objects(), sensor, **kw), rng, repeats,
                                plan=sim.plan, t0=t0, meta=dict(scene.meta))
+
+    def expected_batch(self, scenes, sensor, *, fidelity="default", zones=None, dtype="float32", prune: bool = True,
+                       parts: bool = False, chunk: int | None = None, progress=None) -> BatchResult:
+        """One :class:`FastSimulator` of the whole list (its compiled batches, shared terms and threads)."""
+        kw = {} if chunk is None else {"chunk": chunk}
+        sim = FastSimulator(list(scenes), sensor, fidelity=fidelity, zones=zones, dtype=dtype, prune=prune, **kw)
+        out = sim.expected(parts=parts, progress=progress)
+        if parts:
+            out = dict(out)
+            return BatchResult(expected=out.pop("counts"), parts=out, fidelity=sim.plan.fidelity,
+                               warnings=tuple(sim.plan.warnings), plan=sim.plan)
+        return BatchResult(expected=out, parts=None, fidelity=sim.plan.fidelity, warnings=tuple(sim.plan.warnings),
+                           plan=sim.plan)
+
+    def counts_and_jacobian(self, scenes, sensor, *, fidelity="default", names=("photon_scale",), axes,
+                            zones=None, theta=None, chunk: int = 25, progress=None) -> CountsJacobian:
+        """Central differences of the transport in float64 (:mod:`~nlosplan.simulators.fast.jacobian`)."""
+        return counts_and_jacobian(list(scenes), sensor, fidelity=fidelity, names=tuple(names), axes=axes, zones=zones,
+                                   theta=theta, chunk=chunk, progress=progress)

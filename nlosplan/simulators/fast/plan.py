@@ -359,7 +359,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         terms.append(Term(n_hit > 0, f"first bounce: {rect.name}", reason))
     direct = bool(np.any(w > 0))
 
-    sigmas = [s.sigma_ps for s in sensors]
+    sigmas = [s.impulse_sigma_ps for s in sensors]
     sigma_max = max(sigmas)
     support = support_sigma_ps(sigma_max)  # the support's sigma: sensors of nearby jitter share one plan structure
     # arrival times that can reach the window through the impulse response and the time walk's largest shift

@@ -16,7 +16,7 @@ from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.resources import default_threads
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.pipeline import sample_counts
+from nlosplan.sensor_models.noise import CaptureNoise
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
 from nlosplan.sensor_models.transient import DEPOSIT_METHODS, default_deposit, deposit_method
 from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms
@@ -413,7 +413,7 @@ class FastSimulator:
             scenes; zones as ``(rows, cols)`` unless a subset was requested.
         dict of such arrays (with ``parts``)
             ``counts`` and the linear parts ``direct``, ``object``,
-            ``background``, ``crosstalk`` (before pile-up and clipping).
+            ``floor`` (dark + ambient), ``crosstalk`` (before pile-up and clipping).
         """
         out = self._run(parts, progress)
         if parts:
@@ -435,5 +435,4 @@ class FastSimulator:
             raise UserError(f"repeats={repeats} must be >= 1")
         mean = jnp.asarray(self.expected())
         mean = jnp.broadcast_to(mean, (int(repeats),) + mean.shape)
-        s = self.plan.sensor
-        return np.asarray(sample_counts(key, mean, saturation=s.saturation, max_count=s.max_count))
+        return np.asarray(CaptureNoise.of(self.plan.sensor).draw(key, mean))

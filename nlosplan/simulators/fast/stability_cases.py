@@ -337,13 +337,13 @@ def dynamic_range_check(o64: dict, o32: dict, rtol: float = 1e-3) -> tuple[bool,
     """Compare float32 and float64 parts in the bins where the object part exceeds 1e-3 of its max.
 
     The object part and the counts must agree to ``rtol`` (relative); the signal a user extracts,
-    ``counts - direct - background``, must agree to ``rtol`` of the Poisson noise ``sqrt(counts)`` (float32
+    ``counts - direct - floor``, must agree to ``rtol`` of the Poisson noise ``sqrt(counts)`` (float32
     cannot resolve a 0.1-count return under 1e6 counts of a pulse tail, and need not).
     """
     obj64, obj32 = np.asarray(o64["object"], np.float64), np.asarray(o32["object"], np.float64)
     c64, c32 = np.asarray(o64["counts"], np.float64), np.asarray(o32["counts"], np.float64)
-    sig64 = c64 - np.asarray(o64["direct"], np.float64) - np.asarray(o64["background"], np.float64)
-    sig32 = c32 - np.asarray(o32["direct"], np.float64) - np.asarray(o32["background"], np.float64)
+    sig64 = c64 - np.asarray(o64["direct"], np.float64) - np.asarray(o64["floor"], np.float64)
+    sig32 = c32 - np.asarray(o32["direct"], np.float64) - np.asarray(o32["floor"], np.float64)
     sel = obj64 > 1e-3 * obj64.max()
     e_obj = float(np.max(np.abs(obj32[sel] - obj64[sel]) / obj64[sel]))
     e_cnt = float(np.max(np.abs(c32[sel] - c64[sel]) / c64[sel]))

@@ -37,6 +37,7 @@ from nlosplan._jax import jax, jnp
 from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.sensor_models.binning import bin_impulses
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
+from nlosplan.sensor_models.noise import floor_rate_hz, per_bin
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import (RowPattern, bin_nodes_without_irf, deposit, deposit_at, deposit_method,
                                               irf_matrix, sum_convolve)
@@ -346,18 +347,19 @@ def scene_counts(static, arrays, scene_p, terms: dict, parts: bool = False, shar
             obj = sp["photon_scale"] * to_bins(static, terms, zone_nodes(
                 static, arrays, _scene_nodes(static, arrays, scene_p, bw, t0, shared), bw, t0))
     lam = direct + obj + xt
-    rate = (sp["dark_rate_hz"] if static.dark else 0.0) + (
-        sp["ambient_rate_hz"] * jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
-    bg = jnp.asarray(rate, dtype) * bw * 1e-12
+    # a pruned term is a Python 0.0 (folded when traced, no array operation)
+    rate = floor_rate_hz(sp["dark_rate_hz"] if static.dark else 0.0, sp["ambient_rate_hz"] if static.ambient else 0.0,
+                         jnp.asarray(scene_p["lights"], dtype) if static.ambient else 0.0)
+    floor = per_bin(jnp.asarray(rate, dtype), bw)
     dead = None if static.dead_time_ps is None else static.dead_time_ps / bw
-    counts = counts_from_rates(lam, iterations=sp["iterations"], background_per_bin=bg, pileup=static.pileup,
+    counts = counts_from_rates(lam, iterations=sp["iterations"], floor_per_bin=floor, pileup=static.pileup,
                                max_count=MAX_COUNT_24BIT if static.saturation else None, spads=static.spads,
                                dead_bins=dead)
     if not parts:
         return counts
     it = sp["iterations"]
     return counts, {"direct": it * direct, "object": it * obj,
-                    "background": jnp.broadcast_to(it * bg, counts.shape), "crosstalk": it * xt}
+                    "floor": jnp.broadcast_to(it * floor, counts.shape), "crosstalk": it * xt}
 
 
 def _walked(static, arrays, scene_p, terms, bw, t0, shared=None):
@@ -393,7 +395,7 @@ def forward(static, arrays, scene_p, sensor_p, parts: bool = False):
     -------
     counts : array, shape (Z, n_bins)
     parts : dict of arrays, shape (Z, n_bins) (only if ``parts``)
-        ``direct``, ``object``, ``background`` (ambient + dark), ``crosstalk``.
+        ``direct``, ``object``, ``floor`` (dark + ambient: :mod:`~nlosplan.sensor_models.noise`), ``crosstalk``.
 
     Notes
     -----

@@ -9,7 +9,7 @@ import numpy as np
 
 from nlosplan.errors import UserError
 from nlosplan.simulators.mitsuba.simulator import TwinSimulator
-from nlosplan.simulators.result import SimulationResult, assemble_result
+from nlosplan.simulators.result import BatchResult, CountsJacobian, SimulationResult, assemble_result
 from nlosplan.simulators.scene import NLOSWarning
 
 __all__ = ["TwinBackend"]
@@ -68,3 +68,29 @@ class TwinBackend:
         out = sim.expected(parts=True)
         return assemble_result(sim, out, sim.without_objects(), rng, repeats, plan=None, t0=t0,
                                meta={**scene.meta, "twin": sim.describe()})
+
+    def expected_batch(self, scenes, sensor, *, fidelity="default", zones=None, dtype=None, prune=None,
+                       parts: bool = False, chunk: int | None = None, progress=None) -> BatchResult:
+        """Each scene rendered in turn (``chunk`` does not apply); the planes' warning is returned once, not warned."""
+        scenes = list(scenes)
+        outs, said = [], []
+        for i, scene in enumerate(scenes):
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", NLOSWarning)
+                _warn_planes(scene)
+            said += [str(w.message) for w in caught if str(w.message) not in said]
+            sim = TwinSimulator(scene, sensor, fidelity=fidelity, zones=zones)
+            outs.append(sim.expected(parts=parts))
+            if progress is not None:
+                progress(i + 1, len(scenes))
+        fid = sim.fidelity
+        if not parts:
+            return BatchResult(expected=np.stack(outs), parts=None, fidelity=fid, warnings=tuple(said))
+        stacked = {k: np.stack([o[k] for o in outs]) for k in outs[0]}
+        return BatchResult(expected=stacked.pop("counts"), parts=stacked, fidelity=fid, warnings=tuple(said))
+
+    def counts_and_jacobian(self, scenes, sensor, **kw) -> CountsJacobian:
+        """Not offered: the twin is not differentiated (the bounds' Jacobians come from the fast backend)."""
+        raise UserError("the mitsuba twin is not differentiated: use backend='fast' for expected counts with "
+                        "their derivatives")
+

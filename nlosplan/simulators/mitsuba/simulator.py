@@ -35,8 +35,8 @@ from nlosplan._jax import jnp
 from nlosplan.constants import C_M_PER_PS, MAX_COUNT_24BIT
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.pipeline import (background_per_bin, bin_arrivals, counts_from_rates, dead_bins, pulse_boxes,
-                                             sample_counts)
+from nlosplan.sensor_models.noise import CaptureNoise, floor_per_bin
+from nlosplan.sensor_models.pipeline import bin_arrivals, counts_from_rates, dead_bins, pulse_boxes
 from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light, zone_values
 from nlosplan.sensor_models.transient import bin_nodes_without_irf, deposit_at, irf_extent_ps, irf_matrix
 from nlosplan.simulators.mitsuba.fidelity import resolve_twin_fidelity
@@ -239,9 +239,9 @@ class TwinSimulator:
         if shift_ps is not None:
             x = move_nodes(x, grid.node_times(s.bin_width_ps, s.start_offset_ps), s.bin_width_ps / grid.oversample,
                            offsets_ps=shift_ps)
-        if pulse is None and s.sigma_ps == 0:
+        if pulse is None and s.impulse_sigma_ps == 0:
             return np.asarray(bin_nodes_without_irf(grid, x), dtype=np.float64)
-        mat = irf_matrix(grid, bin_width_ps=s.bin_width_ps, sigma_ps=s.sigma_ps, pulse=pulse,
+        mat = irf_matrix(grid, bin_width_ps=s.bin_width_ps, sigma_ps=s.impulse_sigma_ps, pulse=pulse,
                          extent_ps=irf_extent_ps(s), nominal_bin_width_ps=s.bin_width_ps)
         return np.asarray(x @ jnp.asarray(mat, x.dtype), dtype=np.float64)
 
@@ -278,17 +278,17 @@ class TwinSimulator:
         xt = np.zeros_like(direct)
         if s.crosstalk > 0:  # the zone's gain and time offset, no overlap
             xt = np.asarray(bin_arrivals(when[:, None], (s.crosstalk * g)[:, None], s.bin_edges_ps(),
-                                         s.sigma_ps, pulse_boxes(s)), dtype=np.float64)
-        bg = background_per_bin(s, self.scene.lights_on)
+                                         s.impulse_sigma_ps, pulse_boxes(s)), dtype=np.float64)
+        bg = floor_per_bin(s, self.scene.lights_on)
         counts = np.asarray(counts_from_rates(jnp.asarray(direct + obj + xt), iterations=float(s.iterations),
-                                              background_per_bin=bg, pileup=s.pileup,
+                                              floor_per_bin=bg, pileup=s.pileup,
                                               max_count=MAX_COUNT_24BIT if s.saturation else None,
                                               spads=s.spads_per_zone, dead_bins=dead_bins(s)), dtype=np.float64)
         if not parts:
             return self._shape(counts)
         it = float(s.iterations)
         return {"counts": self._shape(counts), "direct": self._shape(it * direct), "object": self._shape(it * obj),
-                "background": self._shape(np.full_like(counts, it * bg)), "crosstalk": self._shape(it * xt)}
+                "floor": self._shape(np.full_like(counts, it * bg)), "crosstalk": self._shape(it * xt)}
 
     def sample(self, rng=0, repeats: int = 1) -> np.ndarray:
         """Poisson captures of the expected counts, shape ``(repeats, *expected().shape)``, int64."""
@@ -298,8 +298,7 @@ class TwinSimulator:
             raise UserError(f"repeats={repeats} must be >= 1")
         key = jax.random.key(int(rng)) if isinstance(rng, (int, np.integer)) else rng
         mean = np.broadcast_to(self.expected(), (int(repeats),) + self.expected().shape)
-        return np.asarray(sample_counts(key, jnp.asarray(mean), saturation=self.sensor.saturation,
-                                        max_count=self.sensor.max_count))
+        return np.asarray(CaptureNoise.of(self.sensor).draw(key, jnp.asarray(mean)))
 
     def describe(self) -> dict:
         """What made this result: fidelity, variant, seed, illumination, timings (JSON-friendly)."""
