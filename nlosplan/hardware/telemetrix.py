@@ -46,8 +46,7 @@ import time
 
 from nlosplan.errors import UserError
 from nlosplan.hardware import telemetrix_protocol as tp
-from nlosplan.hardware.gantry import (BOOT_WAIT_S, GantryPosition, LimitError, WrongFirmware, check_box,
-                                      probe_firmware)
+from nlosplan.hardware.gantry import BOOT_WAIT_S, GantryPosition, WrongFirmware, check_box, probe_firmware
 from nlosplan.hardware.telemetrix_config import TelemetrixConfig
 from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout, close_serial, open_serial
 
@@ -234,13 +233,7 @@ class TelemetrixGantry:
         LimitError
             A target beyond +-32,767 steps (the firmware would drive elsewhere).
         """
-        targets = self.config.to_steps(float(x_mm), float(y_mm))
-        for name, t in zip("xy", targets):
-            if abs(t) > tp.STEP_LIMIT:
-                raise LimitError(f"gantry target ({x_mm:.3f}, {y_mm:.3f}) mm is {t:,} steps on {name}; "
-                                 f"Telemetrix4Arduino decodes step targets as 16-bit AVR ints (+-{tp.STEP_LIMIT:,} "
-                                 "steps); nothing was sent")
-        return targets
+        return self.config.checked_steps(x_mm, y_mm)
 
     def _speeds(self, feed_mm_min: float) -> tuple[int, int]:
         return tuple(max(1, min(self.config.max_speed, round(feed_mm_min / 60.0 * ax.steps_per_mm)))

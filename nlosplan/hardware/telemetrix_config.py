@@ -154,6 +154,18 @@ class TelemetrixConfig:
                                     f"{ax.steps_per_mm:.2f} steps/mm; beyond, it drives the other way): "
                                     "narrow --limits or move origin_mm")
 
+    def checked_steps(self, x_mm: float, y_mm: float) -> tuple[int, int]:
+        """:meth:`to_steps`, refused (LimitError, one line) beyond the firmware's +-32,767 step targets."""
+        from nlosplan.hardware.gantry import LimitError
+
+        targets = self.to_steps(float(x_mm), float(y_mm))
+        for name, t in zip("xy", targets):
+            if abs(t) > STEP_LIMIT:
+                raise LimitError(f"gantry target ({x_mm:.3f}, {y_mm:.3f}) mm is {t:,} steps on {name}; "
+                                 f"Telemetrix4Arduino decodes step targets as 16-bit AVR ints (+-{STEP_LIMIT:,} "
+                                 "steps); nothing was sent")
+        return targets
+
     def to_mm(self, x_steps: int, y_steps: int) -> tuple[float, float]:
         """User-frame position of stepper positions."""
         out = []
