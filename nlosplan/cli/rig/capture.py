@@ -419,5 +419,8 @@ are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
 --home). --emulate runs both devices as pty emulators (DENALI scene, fast
 simulator) driven by the same code, --emulate lidar or --emulate gantry one of
-them; emulated motion runs --time-scale times faster. docs/rig-connect.md: set-up
-and every error line."""
+them; emulated motion runs --time-scale times faster. A gantry that counts from
+where the carriage stood when the port opened (Telemetrix; GRBL without homing)
+parks at that origin, and when the store's last session did not end there the
+run asks to confirm the carriage is at the origin (--origin-confirmed) before
+it moves. docs/rig-connect.md: set-up and every error line."""
