@@ -5,6 +5,7 @@ import json
 import pytest
 
 from nlosplan.cli import main
+from nlosplan.data.store import CaptureStore
 
 
 def _run(capsys, *argv):
@@ -62,3 +63,58 @@ def test_emulated_capture_then_status(capsys, tmp_path):
     assert code == 0 and "0 captured, 6 already stored" in out
     code, out, err = _run(capsys, "rig", "status", "--store", store, "--run", run_id)
     assert f"{run_id}: 6/6 captured, 0 left" in out
+
+
+def test_telemetrix_dry_run_moves_only_the_y_motor_from_position_0_to_1(capsys):
+    code, out, err = _run(capsys, "rig", "dry-run", "--gantry-kind", "telemetrix", "--plan", "raster", "--positions",
+                          "0-1", "--json")
+    assert code == 0, err
+    data = json.loads(out)
+    (m0, m1) = data["moves"]
+    assert {"x_mm", "y_mm", "steps"} <= set(m0) and m0["steps"] == {"x": 0, "y": 0}
+    # DENALI's order: y is the serpentine axis, on motor 1 (pins 3/6); x (motor 0, pins 2/5) stays
+    assert (m1["x_mm"], m1["steps"]["x"]) == (0.0, 0) and m1["steps"]["y"] == 3619 and m1["y_mm"] > 35.5
+    assert data["gantry"]["motors"]["x"] == {"motor": 0, "step_pin": 2, "dir_pin": 5,
+                                             "steps_per_mm": 2850 / 28, "flip": False}
+    code, out, err = _run(capsys, "rig", "dry-run", "--positions", "0-1", "--json")   # GRBL: no steps known
+    assert code == 0 and [m["steps"] for m in json.loads(out)["moves"]] == [None, None]
+
+
+def test_telemetrix_dry_run_refuses_limits_the_firmware_cannot_count(capsys):
+    code, out, err = _run(capsys, "rig", "dry-run", "--gantry-kind", "telemetrix", "--limits", "0:320,-330:320")
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert ("gantry limit y = -330 mm is 33,589 steps from origin_mm 0 mm; Telemetrix4Arduino decodes step targets "
+            "as 16-bit AVR ints (+-32,767 steps = y -321.9..321.9 mm") in err
+
+
+def test_a_run_that_did_not_park_makes_the_next_one_confirm_the_origin(capsys, tmp_path):
+    """A Telemetrix gantry counts from wherever the carriage stands when the port opens (no switches)."""
+    store = tmp_path / "t.db"
+    base = ["rig", "capture", "--emulate", "--gantry-kind", "telemetrix", "--positions", "0-1", "--repeats", "1",
+            "--settle", "0", "--time-scale", "50", "--store", str(store), "--json"]
+    code, out, err = _run(capsys, *base, "--no-park")
+    assert code == 0, err
+    run_id = json.loads(out)["run_id"]
+    code, out, err = _run(capsys, "rig", "status", "--store", str(store), "--json")
+    (row,) = json.loads(out)["runs"]
+    assert row["parked_at_origin"] is False and row["gantry_session"]["end_xy"] == [0.0, 35.5551]
+    code, out, err = _run(capsys, "rig", "status", "--store", str(store))
+    assert "gantry: left at (0, 35.5551) mm, not at the origin (0, 0) mm" in out
+    # the same run again (a resume) and another run both stop before anything moves
+    for extra in ([], ["--positions", "2"]):
+        code, out, err = _run(capsys, *base, *extra)
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+        assert (f"the last session on this store (run {run_id}, opened " in err and "left the carriage at "
+                "(0, 35.5551) mm, not at the origin (0, 0) mm; this telemetrix gantry counts from wherever the "
+                "carriage stands when the port opens: move the carriage to the origin (0, 0) mm and rerun with "
+                "--origin-confirmed; nothing moved" in err), err
+    with CaptureStore(store) as st:
+        assert st.count() == 2
+    code, out, err = _run(capsys, *base, "--positions", "2", "--origin-confirmed")
+    assert code == 0 and json.loads(out)["finalize"][-1] == "gantry parked at (0, 0) mm", err
+    code, out, err = _run(capsys, "rig", "status", "--store", str(store), "--json")
+    rows = {r["run_id"]: r for r in json.loads(out)["runs"]}
+    new = next(r for rid, r in rows.items() if rid != run_id)
+    assert new["parked_at_origin"] is True and new["gantry_session"]["origin_confirmed"] is True
+    code, out, err = _run(capsys, *base)            # parked at the origin last time: no question asked
+    assert code == 0 and json.loads(out)["resumed"] == 2, err

@@ -151,9 +151,13 @@ def test_wrong_firmware_on_the_gantry_port_both_ways(capsys, store):
     with EmulatedGrbl() as grbl:
         _fails(capsys, store, ["--emulate", "lidar", "--gantry", grbl.port, "--gantry-kind", "telemetrix", *QUICK],
                "not Telemetrix4Arduino: use --gantry-kind grbl")
-    with EmulatedTelemetrix() as tmx:
+    with EmulatedTelemetrix(reset_on_open=False) as tmx:   # a board that keeps running answers the request
         _fails(capsys, store, ["--emulate", "lidar", "--gantry", tmx.port, *QUICK],
                "runs Telemetrix4Arduino 5.4.4, not GRBL: use --gantry-kind telemetrix")
+    with EmulatedTelemetrix() as tmx:                       # one that resets loses it while it boots
+        _fails(capsys, store, ["--emulate", "lidar", "--gantry", tmx.port, *QUICK],
+               "a Telemetrix4Arduino board that reset as the port opened answers no GRBL request: "
+               "--gantry-kind telemetrix or auto")
 
 
 def test_bad_rig_file_and_limits_outside_the_machine_space(capsys, store, tmp_path):
@@ -161,6 +165,15 @@ def test_bad_rig_file_and_limits_outside_the_machine_space(capsys, store, tmp_pa
     rig.write_text("[telemetrix.x]\nsteps_per_mm = 0\n")
     _fails(capsys, store, ["--emulate", "--gantry-kind", "telemetrix", "--rig-file", str(rig), *QUICK],
            "telemetrix x.steps_per_mm = 0")
+    # what Telemetrix4Arduino's 16-bit ints cannot represent is refused before anything moves
+    rig.write_text("[telemetrix]\nmax_speed = 65535\n")
+    _fails(capsys, store, ["--emulate", "--gantry-kind", "telemetrix", "--rig-file", str(rig), *QUICK],
+           "max_speed = 65535 in " + str(rig) + " must be an integer 1..32767 steps/s: Telemetrix4Arduino reads it "
+           "as a 16-bit AVR int (above 32767 it arrives negative; 65535 runs at 1 step/s)")
+    _fails(capsys, store, ["--emulate", "--gantry-kind", "telemetrix", "--limits", "0:330,0:320", *QUICK],
+           "gantry limit x = 330 mm is 33,589 steps from origin_mm 0 mm; Telemetrix4Arduino decodes step "
+           "targets as 16-bit AVR ints (+-32,767 steps = x -321.9..321.9 mm at 101.79 steps/mm; beyond, it drives "
+           "the other way): narrow --limits or move origin_mm")
     with EmulatedGrbl(settings={22: 1, 20: 1, 130: 200, 131: 320}) as grbl:
         _fails(capsys, store, ["--emulate", "lidar", "--gantry", grbl.port, "--unlock", *QUICK],
                "gantry limits x 0..320 mm map to machine x -200..120 mm (work offset -200 mm), outside GRBL's "

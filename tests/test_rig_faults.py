@@ -60,10 +60,10 @@ def test_gantry_alarm_mid_move_then_resume_after_unlock(tmp_path):
     with emulated_rig(time_scale=50, gantry_faults=GantryFaults(alarm_on_move=3)) as rig, \
             CaptureStore(tmp_path / "r.db") as store:
         ex = Executor(rig, store, run_id="run", context=CTX)
-        with pytest.raises(GrblAlarm, match=r"moving to \(71.111, 0.000\) mm: ALARM:1 \(hard limit"):
+        with pytest.raises(GrblAlarm, match=r"moving to \(0.000, 71.111\) mm: ALARM:1 \(hard limit"):
             ex.run(_plan())
         assert ex.summary.captured == 4
-        assert ex.summary.finalize[-1] == "gantry in alarm (ALARM:1): not parked, last reported at (35.556, 0.000) mm"
+        assert ex.summary.finalize[-1] == "gantry in alarm (ALARM:1): not parked, last reported at (0.000, 35.556) mm"
         _check_once(store, 4)
         # GRBL after ALARM:1 answers nothing, status requests and $X included, until a soft reset
         with pytest.raises(DeviceTimeout, match="answers nothing after ALARM:1/2 until a soft reset"):

@@ -44,7 +44,7 @@ def test_json_contract_and_curves(small):
         assert caps == sorted(caps) and caps[-1] <= 10 and secs == sorted(secs) and secs[0] > 0
         assert len({tuple(p) for p in r["positions_mm"]}) == len(r["positions_mm"])  # no position twice
     raster = [r for r in res["runs"] if r["strategy"] == "raster"]
-    assert raster[0]["positions_mm"][:3] == [[0.0, 0.0], [80.0, 0.0], [160.0, 0.0]]  # the snake
+    assert raster[0]["positions_mm"][:3] == [[0.0, 0.0], [0.0, 80.0], [0.0, 160.0]]  # DENALI's snake: y first
     assert (out / "active_vs_raster.png").stat().st_size > 10_000
     assert "| strategy |" in (out / "active_vs_raster.md").read_text()
     assert res["versions"]["casadi"] and res["config"]["seeds"] == [0, 1]

@@ -3,11 +3,19 @@
 Gantry frame
 ------------
 DENALI scans a 10 x 10 snake raster over 0-320 mm per axis (pitch 320/9 ≈
-35.56 mm, SENSOR_FACTS.md). Position index ``p`` (the order of DENALI's
-published poses) is row ``r = p // 10`` and step ``k = p % 10``; even rows run
-one way and odd rows back, so the gantry column is ``k`` on even rows and
-``9 - k`` on odd ones. Gantry ``x`` runs along a row (column index times the
-pitch, from position 0), gantry ``y`` across rows.
+35.56 mm, SENSOR_FACTS.md), in the order of its capture code: cc-hardware's
+``SnakeStepperController`` with the axes ``x`` then ``y``
+(``capture/capture_spad_nlos.py``) steps ``x`` slowly and runs ``y`` back
+and forth, and its gantry drives ``x`` with the motor on CNC-shield pins 2/5
+(``SingleDrive1AxisGantryXConfig``). Position index ``p`` -- DENALI's capture
+``p``, the index of its published poses (``poses.json``, ``tag1_positions``)
+-- is column ``c = p // 10`` of gantry ``x`` and step ``k = p % 10`` along
+gantry ``y``; even columns run up ``y`` and odd ones back, so the gantry row
+is ``k`` on even columns and ``9 - k`` on odd ones:
+
+    x_mm = (p // 10) * pitch,   y_mm = (k if (p // 10) % 2 == 0 else 9 - k) * pitch.
+
+Positions 0 and 1 differ in ``y`` only; 9 and 10 in ``x`` only.
 
 Object pose at an arbitrary position
 ------------------------------------
@@ -40,13 +48,13 @@ _TOL_MM = 0.05
 
 
 def grid_mm(position: int) -> tuple[float, float]:
-    """Gantry (x, y) in mm of DENALI grid position ``position`` (0-99, snake order)."""
+    """Gantry (x, y) in mm of DENALI grid position ``position`` (0-99: DENALI's capture order, x slow, y snaking)."""
     p = int(position)
     if not 0 <= p < GRID_N * GRID_N:
         raise UserError(f"grid position {position!r} is out of range; allowed: 0 to {GRID_N * GRID_N - 1}")
-    r, k = divmod(p, GRID_N)
-    col = k if r % 2 == 0 else GRID_N - 1 - k
-    return col * PITCH_MM, r * PITCH_MM
+    col, k = divmod(p, GRID_N)
+    row = k if col % 2 == 0 else GRID_N - 1 - k
+    return col * PITCH_MM, row * PITCH_MM
 
 
 def grid_index(x_mm: float, y_mm: float) -> int:
@@ -57,7 +65,7 @@ def grid_index(x_mm: float, y_mm: float) -> int:
         return -1
     if abs(col - c) * PITCH_MM > _TOL_MM or abs(row - r) * PITCH_MM > _TOL_MM:
         return -1
-    return r * GRID_N + (c if r % 2 == 0 else GRID_N - 1 - c)
+    return c * GRID_N + (r if c % 2 == 0 else GRID_N - 1 - r)
 
 
 @lru_cache(maxsize=1)

@@ -387,6 +387,8 @@ class DryRunReport:
     travel_mm : float
     seconds : float
         Estimated run time: motion (trapezoid, feed and acceleration), settle, frames.
+    steps : list of dict or None
+        Per move, the controller's targets per motor (``{"x": steps, "y": steps}``) when a controller was given.
     """
 
     moves: list
@@ -395,13 +397,18 @@ class DryRunReport:
     problems: list
     travel_mm: float
     seconds: float
+    steps: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return dict(self.__dict__)
+        out = dict(self.__dict__)
+        steps = out.pop("steps") or [None] * len(self.moves)
+        out["moves"] = [{"x_mm": x, "y_mm": y, "settle_s": s, "steps": st} for (x, y, s), st in zip(self.moves, steps)]
+        return out
 
 
 def dry_run(plan: Plan, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), start_mm=(0.0, 0.0), feed_mm_min: float = 3000.0,
-            accel_mm_s2: float = 500.0, frame_s: float = 0.35, view=None, max_commands: int = 1_000_000) -> DryRunReport:
+            accel_mm_s2: float = 500.0, frame_s: float = 0.35, view=None, controller=None,
+            max_commands: int = 1_000_000) -> DryRunReport:
     """List a plan's moves and check them before anything moves.
 
     Parameters
@@ -417,6 +424,9 @@ def dry_run(plan: Plan, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), start_mm=(0.0
     view : callable, optional
         ``view(x_mm, y_mm) -> message or None``: the direct-view check
         (e.g. :func:`view_problem` bound to a sensor and object).
+    controller : callable, optional
+        ``controller(x_mm, y_mm) -> {motor: steps}``: the gantry controller's targets of a move (a Telemetrix
+        rig's steps); a UserError it raises is a problem.
     max_commands : int
         Stop an endless plan.
 
@@ -425,7 +435,7 @@ def dry_run(plan: Plan, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), start_mm=(0.0
     DryRunReport
     """
     (x0, x1), (y0, y1) = limits_mm
-    moves, lights, problems = [], [], []
+    moves, lights, problems, steps = [], [], [], []
     captures, step, travel, seconds = 0, 0, 0.0, 0.0
     here, target, settle = tuple(start_mm), None, 0.0
     v, a = feed_mm_min / 60.0, accel_mm_s2
@@ -449,6 +459,12 @@ def dry_run(plan: Plan, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), start_mm=(0.0
                     checked[key] = view(cmd.x_mm, cmd.y_mm)
                 if checked[key]:
                     problems.append(f"move {len(moves)}: {checked[key]}")
+            if controller is not None:
+                try:
+                    steps.append(controller(cmd.x_mm, cmd.y_mm))
+                except UserError as exc:
+                    steps.append(None)
+                    problems.append(f"move {len(moves)}: {exc}")
         elif isinstance(cmd, SetLights):
             lights.append(cmd.on)
         elif isinstance(cmd, Capture):
@@ -469,4 +485,4 @@ def dry_run(plan: Plan, *, limits_mm=((0.0, 320.0), (0.0, 320.0)), start_mm=(0.0
             problems.append(f"unknown command {cmd!r}")
     else:
         problems.append(f"the plan did not end within {max_commands} commands")
-    return DryRunReport(moves, captures, lights, problems, travel, seconds)
+    return DryRunReport(moves, captures, lights, problems, travel, seconds, steps)

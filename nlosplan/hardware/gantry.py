@@ -9,10 +9,17 @@ per mm, axis flips and the power-up origin of the rig file), and every
 position it reports says both (:class:`GantryPosition`).
 
 :func:`probe_firmware` tells GRBL from Telemetrix4Arduino on a port without
-harming either: it first sends Telemetrix's two-byte "firmware version"
-request (GRBL drops control characters), listens for a GRBL banner or a
-Telemetrix report, and only then asks GRBL for a status report (``?``,
-which a Telemetrix board would take as the length of a 63-byte packet).
+confusing either. Opening the port resets an Arduino, and its bootloader
+loses what arrives for about 1-2 s; Telemetrix4Arduino then reads any byte
+as a packet length (GRBL's ``?`` = 63 overruns its 30-byte buffer and hangs
+it until the next reset), while GRBL drops control characters. So the probe
+(1) sends nothing while the board boots (``quiet_s``; the real telemetrix
+client waits 4 s, :data:`BOOT_WAIT_S`) and takes a GRBL banner if one comes,
+(2) then asks Telemetrix for its firmware version (two control bytes GRBL
+ignores), again every ``query_every_s``, and (3) only when asked to, and
+only after that, sends GRBL's ``?`` (and a soft reset, 0x18). The Telemetrix
+driver never sends (3); ``--gantry-kind auto`` sends it only once a
+Telemetrix board would have answered.
 """
 
 from __future__ import annotations
@@ -25,10 +32,13 @@ from typing import Protocol
 from nlosplan.errors import UserError
 from nlosplan.hardware.transport import DeviceTimeout
 
-__all__ = ["GANTRY_KINDS", "GantryDriver", "GantryPosition", "LimitError", "Probe", "WrongFirmware", "check_box",
-           "probe_firmware"]
+__all__ = ["BOOT_WAIT_S", "GANTRY_KINDS", "GantryDriver", "GantryPosition", "LimitError", "Probe", "WrongFirmware",
+           "check_box", "probe_firmware"]
 
 GANTRY_KINDS = ("grbl", "telemetrix", "auto")
+#: Seconds to send nothing after opening a port that may hold a Telemetrix board (the telemetrix client's
+#: ``arduino_wait``, which DENALI keeps at 4): its bootloader loses what arrives meanwhile.
+BOOT_WAIT_S = 4.0
 #: Telemetrix4Arduino: GET_FIRMWARE_VERSION (packet length 1, command 5); the answer is [4, 5, major, minor, patch].
 TELEMETRIX_VERSION_QUERY = b"\x01\x05"
 _TELEMETRIX_VERSION = re.compile(rb"\x04\x05([\x00-\x3f])([\x00-\x63])([\x00-\x63])")
@@ -82,12 +92,18 @@ class GantryDriver(Protocol):
     kind: str
     port_name: str
     limits_mm: tuple
+    #: Whether reported positions are referenced to the machine (homed, or a controller that kept counting)
+    #: rather than to wherever the carriage stood when the port opened (a reset restarts the counters there).
+    referenced: bool
 
     def prepare(self, *, home: bool = False, unlock: bool = False) -> None:
         """Connect, read the controller's setup, clear what the user allowed, set up the user frame."""
 
     def check_limits(self, x_mm: float, y_mm: float) -> None:
         """Raise a UserError when (x, y) is outside the limits (nothing is sent)."""
+
+    def origin_xy(self) -> tuple[float, float]:
+        """The user-frame position the controller's counters call zero after a reset (its power-up origin)."""
 
     def move_to(self, x_mm: float, y_mm: float, *, feed_mm_min: float | None = None) -> GantryPosition:
         """Move in the user frame and wait until it stands still there."""
@@ -136,7 +152,8 @@ class Probe:
         return f"{len(self.seen)} bytes, e.g. {bytes(self.seen[:24])!r}"
 
 
-def probe_firmware(ser, *, timeout: float = 5.0, status_after_s: float = 0.0, reset_after_s: float | None = None,
+def probe_firmware(ser, *, timeout: float = 5.0, quiet_s: float = 0.0, query_every_s: float | None = 0.5,
+                   grbl_after_s: float | None = None, reset_after_s: float | None = None,
                    poll_s: float = 0.5) -> Probe:
     """Find out which gantry firmware answers on an open serial object.
 
@@ -145,15 +162,19 @@ def probe_firmware(ser, *, timeout: float = 5.0, status_after_s: float = 0.0, re
     ser : serial object
         ``read(n)``/``write(b)`` (the driver's transport).
     timeout : float
-        Seconds to wait in all.
-    status_after_s : float
-        Send GRBL's ``?`` from this many seconds on (0: at once, when GRBL is
-        expected; about 3 s when the port may hold a Telemetrix board still
-        blinking after its reset, which ``?`` would confuse).
+        Seconds to wait in all, from the call (opening the port just before it).
+    quiet_s : float
+        Send nothing for this many seconds (the board's boot after the port opened: bytes sent then are
+        lost); a GRBL banner printed meanwhile is recognised.
+    query_every_s : float or None
+        From ``quiet_s`` on, send Telemetrix's firmware-version request, and again at this period
+        (None: once). Harmless to GRBL, which drops control characters.
+    grbl_after_s : float or None
+        Send GRBL's ``?`` from this many seconds on, every ``poll_s`` (``?`` would hang a Telemetrix board,
+        so only after a Telemetrix board would have answered); None: never (the Telemetrix driver).
     reset_after_s : float or None
-        Send GRBL's soft reset (0x18) after this many seconds without a
-        recognised answer (a GRBL halted by ALARM:1/2 answers nothing else);
-        None: never.
+        Send GRBL's soft reset (0x18) once after this many seconds without a recognised answer (a GRBL
+        halted by ALARM:1/2 answers nothing else); None: never. Ignored without ``grbl_after_s``.
     poll_s : float
         Period of the ``?`` requests.
 
@@ -164,11 +185,15 @@ def probe_firmware(ser, *, timeout: float = 5.0, status_after_s: float = 0.0, re
     """
     seen = bytearray()
     t0 = time.monotonic()
-    ser.write(TELEMETRIX_VERSION_QUERY)
-    _flush(ser)
-    next_poll, reset_sent = t0 + status_after_s, False
+    next_query, next_poll, reset_sent = t0 + quiet_s, None, False
+    if grbl_after_s is not None:
+        next_poll = t0 + max(grbl_after_s, quiet_s)
     while True:
         now = time.monotonic()
+        if next_query is not None and now >= next_query:
+            ser.write(TELEMETRIX_VERSION_QUERY)
+            _flush(ser)
+            next_query = None if query_every_s is None else now + query_every_s
         try:
             waiting = getattr(ser, "in_waiting", 0) or 1
             data = ser.read(min(max(waiting, 1), 4096))
@@ -182,11 +207,12 @@ def probe_firmware(ser, *, timeout: float = 5.0, status_after_s: float = 0.0, re
                 return found
         if now - t0 >= timeout:
             return Probe(None, seen=bytes(seen))
-        if now >= next_poll:
+        if next_poll is not None and now >= next_poll:
             ser.write(b"?")
             _flush(ser)
             next_poll = now + poll_s
-        if reset_after_s is not None and not reset_sent and now - t0 >= reset_after_s:
+        if (next_poll is not None and reset_after_s is not None and not reset_sent
+                and now - t0 >= max(reset_after_s, quiet_s)):
             ser.write(b"\x18")
             _flush(ser)
             reset_sent = True

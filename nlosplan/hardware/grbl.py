@@ -75,6 +75,7 @@ class Grbl(GrblLink):
         self.frame: WorkFrame | None = None
         self.connected_by = ""
         self.last_xy: tuple | None = None
+        self.homed = False
 
     # ------------------------------------------------------------------ session
     def connect(self, timeout: float = 5.0) -> str:
@@ -96,7 +97,10 @@ class Grbl(GrblLink):
         DeviceTimeout
             Nothing at all (wrong port, or the controller is off).
         """
-        found = probe_firmware(self._ser, timeout=timeout, reset_after_s=timeout / 2, poll_s=self.repoll_s)
+        # the Telemetrix request first (GRBL drops control bytes), GRBL's '?' from 0.3 s: a Telemetrix board that
+        # keeps running across the open answers before '?' could hang it
+        found = probe_firmware(self._ser, timeout=timeout, quiet_s=0.0, query_every_s=None, grbl_after_s=0.3,
+                               reset_after_s=timeout / 2, poll_s=self.repoll_s)
         if found.kind == "telemetrix":
             raise WrongFirmware(f"gantry on {self.port_name} runs Telemetrix4Arduino {found.text}, not GRBL: "
                                 "use --gantry-kind telemetrix (or auto)")
@@ -106,7 +110,9 @@ class Grbl(GrblLink):
                                     f"({found.describe_seen()}): wrong baud rate (GRBL uses 115200) or another "
                                     "firmware on this port")
             raise DeviceTimeout(f"no answer from a gantry on {self.port_name} within {timeout:g} s (not even to "
-                                "a soft reset): is this the gantry's port, and is the controller powered?")
+                                "a soft reset): is this the gantry's port, and is the controller powered? (a "
+                                "Telemetrix4Arduino board that reset as the port opened answers no GRBL request: "
+                                "--gantry-kind telemetrix or auto)")
         self._reader.unread(found.rest)
         if found.how in ("banner", "reset"):
             self.banner = found.text
@@ -220,6 +226,7 @@ class Grbl(GrblLink):
             self.alarm = exc.code
             raise GrblAlarm(exc.code, "while homing ($H)", homing_diagnosis(exc.code, before, after)) from None
         self.alarm = None
+        self.homed = True
         return self.wait_idle(context="after homing")
 
     def unlock(self) -> None:
@@ -244,6 +251,17 @@ class Grbl(GrblLink):
         return self.status()
 
     # ------------------------------------------------------------------ motion in the user frame
+    @property
+    def referenced(self) -> bool:
+        """Whether positions are referenced to the machine: homed in this session, or GRBL kept running (a status
+        report answered the probe, no reset banner), so it counts from where it counted before."""
+        return self.homed or self.connected_by == "status"
+
+    def origin_xy(self) -> tuple[float, float]:
+        """The user-frame position of machine zero (where an unhomed GRBL counts from after a reset)."""
+        off = self.frame.offset_mm if self.frame is not None else (0.0, 0.0)
+        return -float(off[0]) + 0.0, -float(off[1]) + 0.0
+
     def check_limits(self, x_mm: float, y_mm: float) -> None:
         """Raise :class:`LimitError` when (x, y) mm is outside the limits (nothing is sent)."""
         check_box(self.limits_mm, x_mm, y_mm)

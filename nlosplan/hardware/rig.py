@@ -20,7 +20,8 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["DEVICES", "Rig", "RigOptions", "device_errors", "emulated_rig", "open_gantry", "open_rig", "rig_session",
+__all__ = ["DEVICES", "Rig", "RigOptions", "device_errors", "emulated_rig", "open_gantry", "open_rig", "park_target",
+           "rig_session",
            "sensor_preset"]
 
 DEVICES = ("lidar", "gantry")
@@ -99,19 +100,25 @@ def sensor_preset(zones: str, range_mode: str):
 
 
 def detect_gantry_kind(port) -> str:
-    """``grbl`` or ``telemetrix``: which firmware answers on ``port`` (Telemetrix asked first, harmlessly for GRBL).
+    """``grbl`` or ``telemetrix``: which firmware answers on ``port``, confusing neither.
+
+    The probe (:func:`~nlosplan.hardware.gantry.probe_firmware`) sends nothing while the board boots after
+    the port opened (:data:`~nlosplan.hardware.gantry.BOOT_WAIT_S`, the telemetrix client's wait; a GRBL
+    banner ends it early), then Telemetrix's version request (GRBL ignores it) every 0.5 s, and GRBL's ``?``
+    only a second later, when a Telemetrix board would have answered; a soft reset after 2.5 s more.
 
     Raises
     ------
     UserError
         Neither answers (one line: nothing, or what arrived).
     """
-    from nlosplan.hardware.gantry import probe_firmware
+    from nlosplan.hardware.gantry import BOOT_WAIT_S, probe_firmware
     from nlosplan.hardware.transport import open_serial
 
     ser, owned = open_serial(port, 115200)
     try:
-        found = probe_firmware(ser, timeout=6.0, status_after_s=3.0, reset_after_s=4.5)
+        found = probe_firmware(ser, timeout=BOOT_WAIT_S + 4.0, quiet_s=BOOT_WAIT_S, query_every_s=0.5,
+                               grbl_after_s=BOOT_WAIT_S + 1.0, reset_after_s=BOOT_WAIT_S + 2.5, poll_s=0.25)
     finally:
         if owned:
             ser.close()
@@ -237,7 +244,7 @@ def _gantry_emulator(kind: str, *, time_scale: float, limits_mm, faults, setting
             raise UserError("the emulated Telemetrix gantry takes no faults (they are GRBL's: alarm, slow-ok)")
         cfg = telemetrix or TelemetrixConfig()
         emu = EmulatedTelemetrix(time_scale=time_scale)
-        return emu, lambda: cfg.to_mm(*emu.steps())
+        return emu, lambda: cfg.to_mm(*emu.carriage_steps())   # where the carriage is, whatever the counters say
     raise UserError(f"an emulated gantry is grbl or telemetrix, not {kind!r} (auto probes a real port)")
 
 
@@ -355,7 +362,8 @@ def rig_session(options: RigOptions) -> Iterator[Rig]:
         else:
             light = o.lights or ManualLights()
             sensor = TMF8828(o.lidar, baudrate=o.baudrate)
-        rig = Rig(sensor, g, light, cfg, o.geometry, o.feed_mm_min, o.park_mm, emulate, tuple(emulators))
+        rig = Rig(sensor, g, light, cfg, o.geometry, o.feed_mm_min, park_target(g, o.park_mm), emulate,
+                  tuple(emulators))
         sensor.start(o.zones, o.range_mode)
         yield rig
     finally:
@@ -367,6 +375,17 @@ def rig_session(options: RigOptions) -> Iterator[Rig]:
                     pass
         for emu in emulators:
             emu.close()
+
+
+def park_target(gantry, park_mm):
+    """Where to park: on a gantry whose counters restart where the carriage stands when the port opens
+    (Telemetrix, GRBL without homing), its origin when that lies inside the limits -- so the next session
+    counts from the same place -- else ``park_mm`` (None: do not park)."""
+    if park_mm is None or getattr(gantry, "referenced", True):
+        return park_mm
+    ox, oy = gantry.origin_xy()
+    (x0, x1), (y0, y1) = gantry.limits_mm
+    return (ox, oy) if x0 <= ox <= x1 and y0 <= oy <= y1 else park_mm
 
 
 def emulated_rig(**kw) -> Iterator[Rig]:

@@ -8,12 +8,19 @@ steps/mm), max speed 32767 steps/s, constant speed (no acceleration ramps:
 ``run_speed_to_position``), no axis flipped, no limit switches: position 0 is
 wherever the carriage was when the board last reset (the port was opened).
 
+The firmware does its arithmetic in 16-bit AVR ``int`` values
+(:mod:`~nlosplan.hardware.telemetrix_protocol`): step targets beyond
++-32,767 steps from the origin (321.9 mm at DENALI's 101.79 steps/mm) and
+speeds or accelerations above 32,767 arrive as other numbers, so a rig file
+that asks for them, and limits that reach beyond them
+(:meth:`TelemetrixConfig.check_reach`), are refused before anything moves.
+
 Example (``nlosplan/hardware/rigs/denali-telemetrix.toml``, the defaults)::
 
     [telemetrix]
     enable_pin = 8
     enable_inverted = true
-    max_speed = 32767          # steps/s (16-bit field); an Uno steps at most ~4000/s
+    max_speed = 32767          # steps/s, at most 32767 (the firmware's 16-bit int); an Uno steps ~4000/s
     acceleration = 0           # steps/s^2; 0: constant speed (DENALI)
     origin_mm = [0.0, 0.0]     # user-frame position of the carriage when the board resets
 
@@ -37,6 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nlosplan.errors import UserError
+from nlosplan.hardware.telemetrix_protocol import SPEED_LIMIT, STEP_LIMIT
 
 __all__ = ["DENALI_STEPS_PER_MM", "AxisConfig", "TelemetrixConfig", "load_rig_file"]
 
@@ -96,12 +104,15 @@ class TelemetrixConfig:
             for pin_name in ("step_pin", "dir_pin"):
                 _pin(getattr(ax, pin_name), f"{name}.{pin_name}", where)
         _pin(self.enable_pin, "enable_pin", where)
-        if not (isinstance(self.max_speed, int) and 1 <= self.max_speed <= 65535):
-            raise UserError(f"telemetrix max_speed = {self.max_speed!r} in {where} must be an integer 1..65535 "
-                            "steps/s (the firmware's 16-bit field)")
-        if not (isinstance(self.acceleration, int) and 0 <= self.acceleration <= 65535):
+        if not (isinstance(self.max_speed, int) and not isinstance(self.max_speed, bool)
+                and 1 <= self.max_speed <= SPEED_LIMIT):
+            raise UserError(f"telemetrix max_speed = {self.max_speed!r} in {where} must be an integer 1..{SPEED_LIMIT} "
+                            "steps/s: Telemetrix4Arduino reads it as a 16-bit AVR int (above 32767 it arrives "
+                            "negative; 65535 runs at 1 step/s)")
+        if not (isinstance(self.acceleration, int) and not isinstance(self.acceleration, bool)
+                and 0 <= self.acceleration <= SPEED_LIMIT):
             raise UserError(f"telemetrix acceleration = {self.acceleration!r} in {where} must be an integer "
-                            "0..65535 steps/s^2 (0: constant speed)")
+                            f"0..{SPEED_LIMIT} steps/s^2 (0: constant speed; the firmware's 16-bit AVR int)")
         if len(self.origin_mm) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v)
                                                for v in self.origin_mm):
             raise UserError(f"telemetrix origin_mm = {self.origin_mm!r} in {where} must be two finite numbers (mm)")
@@ -116,6 +127,44 @@ class TelemetrixConfig:
             s = round((v - o) * ax.steps_per_mm)
             out.append(-s if ax.flip else s)
         return out[0], out[1]
+
+    def reach_mm(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The user-frame box the firmware can address: +-32,767 steps from ``origin_mm`` per axis, mm."""
+        out = []
+        for ax, o in zip(self.axes(), self.origin_mm):
+            half = STEP_LIMIT / ax.steps_per_mm
+            out.append((o - half, o + half))
+        return out[0], out[1]
+
+    def check_reach(self, limits_mm) -> None:
+        """Raise a one-line UserError when ``limits_mm`` reach beyond the firmware's step range.
+
+        Parameters
+        ----------
+        limits_mm : ((xmin, xmax), (ymin, ymax))
+            The gantry limits in the user frame, mm.
+        """
+        for name, (u0, u1), (r0, r1), ax, o in zip("xy", limits_mm, self.reach_mm(), self.axes(), self.origin_mm):
+            for v in (u0, u1):
+                if not r0 - 1e-9 <= v <= r1 + 1e-9:
+                    steps = round((v - o) * ax.steps_per_mm)
+                    raise UserError(f"gantry limit {name} = {v:g} mm is {abs(steps):,} steps from origin_mm "
+                                    f"{o:g} mm; Telemetrix4Arduino decodes step targets as 16-bit AVR ints "
+                                    f"(+-{STEP_LIMIT:,} steps = {name} {r0:.1f}..{r1:.1f} mm at "
+                                    f"{ax.steps_per_mm:.2f} steps/mm; beyond, it drives the other way): "
+                                    "narrow --limits or move origin_mm")
+
+    def checked_steps(self, x_mm: float, y_mm: float) -> tuple[int, int]:
+        """:meth:`to_steps`, refused (LimitError, one line) beyond the firmware's +-32,767 step targets."""
+        from nlosplan.hardware.gantry import LimitError
+
+        targets = self.to_steps(float(x_mm), float(y_mm))
+        for name, t in zip("xy", targets):
+            if abs(t) > STEP_LIMIT:
+                raise LimitError(f"gantry target ({x_mm:.3f}, {y_mm:.3f}) mm is {t:,} steps on {name}; "
+                                 f"Telemetrix4Arduino decodes step targets as 16-bit AVR ints (+-{STEP_LIMIT:,} "
+                                 "steps); nothing was sent")
+        return targets
 
     def to_mm(self, x_steps: int, y_steps: int) -> tuple[float, float]:
         """User-frame position of stepper positions."""

@@ -20,12 +20,14 @@ ENABLE_ALL_REPORTS                       17  - (stepper motion runs only while r
 SET_PIN_MODE_STEPPER                     33  motor, interface (1 = step/dir driver), pin1 (step), pin2 (dir),
                                              pin3, pin4, enable outputs
 STEPPER_MOVE_TO                          34  motor, |position| as 4 bytes, polarity (1: negative)
+STEPPER_MOVE                             35  motor, |relative steps| as 4 bytes, polarity (DENALI's way)
 STEPPER_RUN                              36  motor (accelerate to max speed, decelerate; AccelStepper run())
 STEPPER_SET_MAX_SPEED                    38  motor, speed (2 bytes, steps/s)
 STEPPER_SET_ACCELERATION                 39  motor, acceleration (2 bytes, steps/s^2)
 STEPPER_SET_SPEED                        40  motor, |speed| (2 bytes), polarity
 STEPPER_RUN_SPEED_TO_POSITION            42  motor (constant speed, no ramps; DENALI's way)
 STEPPER_STOP                             43  motor (stop and disable outputs)
+STEPPER_ENABLE_OUTPUTS                   45  motor (drive the enable pin to "enabled")
 STEPPER_SET_ENABLE_PIN                   47  motor, pin
 STEPPER_SET_3_PINS_INVERTED              48  motor, direction, step, enable (0/1)
 STEPPER_IS_RUNNING                       50  motor
@@ -40,20 +42,46 @@ Reports (board -> host)
 position (signed 32 bits); ``[3, 18, motor, running]``; ``[2, 19, motor]``
 motion complete (sent once when the target is reached).
 
-Firmware facts that matter: the board resets when the port opens (an
-Arduino's DTR) and blinks its LED for 2 s before it reads commands (the bytes
-wait in its receive buffer); every stepper position counts from that reset.
-``STEPPER_SET_CURRENT_POSITION`` (41) builds its value from the wrong byte in
-5.4.4 (``command_buffer[2]`` twice), so it is not used. A byte the board
-takes as a packet length waits for that many bytes: a GRBL ``?`` (63) would
-make it wait for 63.
+Firmware facts that matter
+--------------------------
+- The board resets when the port opens (an Arduino's DTR). For about 1-2 s
+  its bootloader owns the serial line and **what arrives is lost**; then
+  ``setup()`` blinks the LED for 2 s with the port open (what arrives waits
+  in the 64-byte receive ring) and ``loop()`` starts reading. The real
+  client (telemetrix 1.46 and DENALI's fork) sends nothing for
+  ``arduino_wait = 4`` s after opening. Every stepper position counts from
+  that reset.
+- ``get_next_command`` takes any byte as a length and reads that many bytes
+  into a 30-byte buffer, then calls ``command_table[command]`` (58 entries,
+  ids 0..57) without a bounds check: a GRBL ``?`` (63) overruns the buffer
+  and the next byte picks the command; an id past the table jumps through
+  a stray pointer. The board then answers nothing until the next reset.
+- **16-bit arithmetic** (AVR ``int``): a position's low bytes are added as
+  ``command_buffer[3] << 8``, so a magnitude with bit 15 set arrives 65,536
+  too small (32,768 -> -32,768; 40,000 -> -25,536; the sign travels in its
+  own byte, so -32,768 arrives as +32,768): step targets (and relative
+  moves) are safe only within +-32,767 (:data:`STEP_LIMIT`).
+  Speeds and accelerations ``(msb << 8) + lsb`` above 32,767 arrive
+  negative (a max speed of 65,535 runs at 1 step/s): at most 32,767
+  (:data:`SPEED_LIMIT`).
+- ``STEPPER_SET_CURRENT_POSITION`` (41) builds its value from the wrong byte
+  in 5.4.4 (``command_buffer[2]`` twice), so it is not used.
+- AccelStepper's ``setEnablePin`` drives the pin at once with the inversion
+  set so far (not yet inverted: HIGH, which disables a CNC shield's drivers);
+  ``setPinsInverted`` only stores the flag; the drivers are enabled by
+  ``enableOutputs`` (command 45, or ``run_steppers`` before each step).
 """
 
 from __future__ import annotations
 
-__all__ = ["Cmd", "PacketError", "PacketReader", "Report", "STEPPERS_FEATURE", "packet", "signed32"]
+__all__ = ["Cmd", "PacketError", "PacketReader", "Report", "SPEED_LIMIT", "STEPPERS_FEATURE", "STEP_LIMIT", "packet",
+           "signed32"]
 
 MAX_COMMAND_LENGTH = 30
+#: Step targets (and relative moves) the firmware decodes right: -STEP_LIMIT .. STEP_LIMIT (AVR int).
+STEP_LIMIT = 32767
+#: Largest speed / acceleration the firmware decodes right (steps/s, steps/s^2; AVR int).
+SPEED_LIMIT = 32767
 STEPPERS_FEATURE = 0x04
 INTERFACE_DRIVER = 1
 
@@ -63,16 +91,20 @@ class Cmd:
 
     GET_FIRMWARE_VERSION = 5
     ARE_U_THERE = 6
+    STOP_ALL_REPORTS = 15
     ENABLE_ALL_REPORTS = 17
     RESET = 18
     SET_PIN_MODE_STEPPER = 33
     STEPPER_MOVE_TO = 34
+    STEPPER_MOVE = 35
     STEPPER_RUN = 36
     STEPPER_SET_MAX_SPEED = 38
     STEPPER_SET_ACCELERATION = 39
     STEPPER_SET_SPEED = 40
     STEPPER_RUN_SPEED_TO_POSITION = 42
     STEPPER_STOP = 43
+    STEPPER_DISABLE_OUTPUTS = 44
+    STEPPER_ENABLE_OUTPUTS = 45
     STEPPER_SET_ENABLE_PIN = 47
     STEPPER_SET_3_PINS_INVERTED = 48
     STEPPER_IS_RUNNING = 50
@@ -153,20 +185,60 @@ def set_pin_mode_stepper(motor: int, step_pin: int, dir_pin: int, *, pin3: int =
     return packet(Cmd.SET_PIN_MODE_STEPPER, motor, INTERFACE_DRIVER, step_pin, dir_pin, pin3, pin4, int(enable))
 
 
+def steps16(value: int) -> int:
+    """``value`` if the firmware decodes it as sent (|value| <= :data:`STEP_LIMIT`).
+
+    Raises
+    ------
+    PacketError
+        Beyond it: Telemetrix4Arduino would move to another target (16-bit arithmetic).
+    """
+    value = int(value)
+    if abs(value) > STEP_LIMIT:
+        raise PacketError(f"step target {value} is beyond what Telemetrix4Arduino decodes (16-bit AVR int: "
+                          f"-{STEP_LIMIT}..{STEP_LIMIT} steps)")
+    return value
+
+
+def speed16(value: int) -> int:
+    """``value`` if the firmware decodes it as sent (0..:data:`SPEED_LIMIT`).
+
+    Raises
+    ------
+    PacketError
+        Above it: Telemetrix4Arduino would read a negative number (16-bit AVR int).
+    """
+    value = int(value)
+    if not 0 <= value <= SPEED_LIMIT:
+        raise PacketError(f"{value} does not fit the 16-bit field as Telemetrix4Arduino reads it "
+                          f"(an AVR int: 0..{SPEED_LIMIT})")
+    return value
+
+
 def move_to(motor: int, position: int) -> bytes:
-    return packet(Cmd.STEPPER_MOVE_TO, motor, *magnitude32(position))
+    return packet(Cmd.STEPPER_MOVE_TO, motor, *magnitude32(steps16(position)))
+
+
+def move(motor: int, steps: int) -> bytes:
+    """STEPPER_MOVE: ``steps`` relative to where the motor is (DENALI's cc-hardware moves this way)."""
+    return packet(Cmd.STEPPER_MOVE, motor, *magnitude32(steps16(steps)))
+
+
+def enable_outputs(motor: int) -> bytes:
+    """STEPPER_ENABLE_OUTPUTS: drive the motor's enable pin to "enabled" (AccelStepper ``enableOutputs``)."""
+    return packet(Cmd.STEPPER_ENABLE_OUTPUTS, motor)
 
 
 def set_max_speed(motor: int, steps_s: int) -> bytes:
-    return packet(Cmd.STEPPER_SET_MAX_SPEED, motor, *u16(steps_s))
+    return packet(Cmd.STEPPER_SET_MAX_SPEED, motor, *u16(speed16(steps_s)))
 
 
 def set_acceleration(motor: int, steps_s2: int) -> bytes:
-    return packet(Cmd.STEPPER_SET_ACCELERATION, motor, *u16(steps_s2))
+    return packet(Cmd.STEPPER_SET_ACCELERATION, motor, *u16(speed16(steps_s2)))
 
 
 def set_speed(motor: int, steps_s: int) -> bytes:
-    return packet(Cmd.STEPPER_SET_SPEED, motor, *u16(abs(int(steps_s))), 1 if steps_s < 0 else 0)
+    return packet(Cmd.STEPPER_SET_SPEED, motor, *u16(speed16(abs(int(steps_s)))), 1 if steps_s < 0 else 0)
 
 
 def run(motor: int) -> bytes:

@@ -125,28 +125,29 @@ class TMF8828:
         self.transcript = []
         seq = start_sequence(zones, range_mode)
         for char in seq:
-            self._toggle_until(char, self.command(char), zones, range_mode)
+            self._check_answer(char, self.command(char), zones, range_mode)
         self.zones, self.range_mode = zones, range_mode
         self.assembler = FrameAssembler(zones)
         self.measuring = True
         return self.firmware_config()
 
-    def _toggle_until(self, char: str, answer: list[str], zones: ZoneMode, range_mode: RangeMode) -> None:
-        """Press a toggle again while its answer says the firmware is not yet in the wanted state.
+    def _check_answer(self, char: str, answer: list[str], zones: ZoneMode, range_mode: RangeMode) -> None:
+        """Check a start command's answer by what the firmware prints; press ``z`` again until it dumps raw.
 
-        The firmware's ``z``, ``O`` and ``o`` cycle a state, so a firmware that
-        was not reset (no DTR reset on open) may start elsewhere: ``z``
-        answers ``Histogram is N`` (1 = raw), ``O`` names the range, ``o`` the
-        firmware. Answers not recognised are left alone.
+        ``z`` cycles the dump mode and answers ``Histogram is N`` (1 = raw), so a firmware that was not reset
+        (no DTR reset on open) may need more presses. After ``m`` the firmware's state line names its mode
+        (``TMF8828 state=measure`` in 8x8, ``TMF882x state=...`` in 3x3/4x4): a mismatch is an error. ``O``
+        prints only a ``#Conf`` line, which names no range, and ``o`` nothing when it works: their effect
+        cannot be read back (the sequence is deterministic after ``d`` and the download, which resets the
+        firmware to long range and no dumps). Answers not recognised are left alone.
         """
         for _ in range(4):
             text = " ".join(answer).lower()
             if char == "z" and "histogram is" in text:
                 again = text.split("histogram is")[1].strip()[:1] != "1"
-            elif char == "O" and ("short" in text) != ("long" in text):
-                again = ("short" in text) != (range_mode is RangeMode.SHORT)
-            elif char == "o" and ("8828 mode" in text) != ("882x mode" in text):
-                again = "882x mode" not in text
+            elif char == "m":
+                self._check_mode(answer, zones)
+                return
             else:
                 return
             if not again:
@@ -154,6 +155,15 @@ class TMF8828:
             answer = self.command(char)
         raise SensorError(f"TMF8828 on {self.port_name}: command {char!r} did not reach the wanted state "
                           f"(last answer {' | '.join(answer)[:80]!r})")
+
+    def _check_mode(self, answer: list[str], zones: ZoneMode) -> None:
+        line = next((ln for ln in answer if " state=" in ln), None)
+        if line is None:
+            return
+        want = "TMF8828" if zones is ZoneMode.Z8X8 else "TMF882x"
+        if not line.startswith(want) or not line.endswith("state=measure"):
+            raise SensorError(f"TMF8828 on {self.port_name}: after 'm' the firmware says {line!r}, not "
+                              f"'{want} state=measure' ({zones.value} zones): it did not start in this mode")
 
     def firmware_config(self) -> dict:
         """What the sensor was started with (stored with every capture)."""

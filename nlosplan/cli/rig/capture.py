@@ -22,11 +22,6 @@ EXAMPLES = {
         "nlosplan rig capture --lidar /dev/ttyACM0 --gantry /dev/ttyACM1 --gantry-kind telemetrix "
         "--rig-file denali-telemetrix.toml --store runs.db",
     ),
-    "dry-run": (
-        "nlosplan rig dry-run --plan raster --repeats 3",
-        "nlosplan rig dry-run --plan positions.csv --limits 0:320,0:320 --json",
-    ),
-    "status": ("nlosplan rig status --store runs.db", "nlosplan rig status --store runs.db --run RUN_ID --json"),
 }
 FAULT_KEYS = {"garble": "garble_every", "truncate": "truncate_every", "drop": "drop_every",
               "disconnect": "disconnect_after_frames", "slow": "slow_answer_s", "alarm": "alarm_on_move",
@@ -157,30 +152,11 @@ def _view_check(args):
     return lambda x, y: view_problem(cfg, obj, args.size if args.size in ("4in", "8in") else "8in", x, y)
 
 
-def _dry(args, factory):
+def _dry(args, factory, controller=None):
     from nlosplan.hardware.executor import dry_run
 
     return dry_run(factory(), limits_mm=args.limits, feed_mm_min=args.feed,
-                   view=None if args.no_view_check else _view_check(args))
-
-
-def _cmd_dry_run(args) -> int:
-    args.sensor_config = None if args.no_view_check else _sensor_config(args)
-    factory, desc, spec, total = _build_plan(args)
-    rep = _dry(args, factory)
-    data = {"plan": desc, **rep.to_dict()}
-    lines = [f"plan: {desc}", f"{len(rep.moves)} moves, {rep.captures} captures, travel {rep.travel_mm:.0f} mm, "
-             f"about {rep.seconds / 60:.1f} min at {args.feed:g} mm/min"]
-    lines += [f"  move {i + 1:3d}: ({x:7.2f}, {y:7.2f}) mm, settle {s:g} s" for i, (x, y, s) in enumerate(rep.moves[:20])]
-    if len(rep.moves) > 20:
-        lines.append(f"  ... {len(rep.moves) - 20} more moves")
-    lines += [f"problem: {p}" for p in rep.problems] or ["checks: every target within the limits"
-                                                         + ("" if args.no_view_check else
-                                                            ", object never in the LiDAR's direct view")]
-    emit(args, data, "\n".join(lines))
-    if rep.problems:
-        raise UserError(f"the plan has {len(rep.problems)} problem(s); first: {rep.problems[0]}")
-    return 0
+                   view=None if args.no_view_check else _view_check(args), controller=controller)
 
 
 def _sensor_config(args):
@@ -227,7 +203,7 @@ def _cmd_capture(args) -> int:
     from nlosplan.cli.live import live_page
 
     with live_page(args, "rig", args.store, run_id=run_id), rig_failures(run_id, args.store) as hold, \
-            CaptureStore(args.store) as store, _open(args, devices) as rig, \
+            CaptureStore(args.store) as store, _open(args, devices, store=store, run_id=run_id) as rig, \
             progress_bar(args, total, f"rig {run_id}", "capture") as bar:
         ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
                                          on_capture=(lambda r: bar.update(1)) if bar is not None else None,
@@ -343,18 +319,29 @@ def resolve_devices(args, *, seed_is_noise: bool) -> dict:
             "sensor_faults": _faults_for("lidar", faults), "gantry_faults": _faults_for("gantry", faults)}
 
 
-def _open(args, devices: dict):
-    """The rig of the command line (:func:`nlosplan.hardware.rig.rig_session`), a context manager."""
+@contextmanager
+def _open(args, devices: dict, *, store=None, run_id: str | None = None):
+    """The rig of the command line (:func:`nlosplan.hardware.rig.rig_session`), a context manager.
+
+    With a store and run id the session is checked and recorded (:func:`nlosplan.cli.rig.origin.origin_session`):
+    a gantry that counts from where the carriage stands needs it at the origin before anything moves.
+    """
+    from nlosplan.cli.rig.origin import origin_session
     from nlosplan.hardware.lights import FixedLights
     from nlosplan.hardware.rig import RigOptions, rig_session
 
     park = None if args.no_park else (args.limits[0][0], args.limits[1][0])
-    return rig_session(RigOptions(**devices, zones=args.zones, range_mode=args.range_mode,
-                                  baudrate=args.baud or 2_000_000, sensor_config=args.sensor_config,
-                                  limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
-                                  lights_on=args.lights == "on", home=args.home, unlock=args.unlock, park_mm=park,
-                                  obj=args.object, size=args.size, seed=args.seed or 0,
-                                  time_scale=args.time_scale or 20.0))
+    with rig_session(RigOptions(**devices, zones=args.zones, range_mode=args.range_mode,
+                                baudrate=args.baud or 2_000_000, sensor_config=args.sensor_config,
+                                limits_mm=args.limits, feed_mm_min=args.feed, lights=FixedLights(args.lights == "on"),
+                                lights_on=args.lights == "on", home=args.home, unlock=args.unlock, park_mm=park,
+                                obj=args.object, size=args.size, seed=args.seed or 0,
+                                time_scale=args.time_scale or 20.0)) as rig:
+        if store is None:
+            yield rig
+        else:
+            with origin_session(args, rig, store, run_id):
+                yield rig
 
 
 def add_device_options(p: argparse.ArgumentParser, *, seed_help: str) -> None:
@@ -380,31 +367,16 @@ def add_device_options(p: argparse.ArgumentParser, *, seed_help: str) -> None:
     p.add_argument("--unlock", action="store_true",
                    help="GRBL: clear an alarm with $X (after ALARM:1/2 a soft reset first); only if you know "
                         "where it is")
+    from nlosplan.cli.rig.origin import ORIGIN_HELP
+
+    p.add_argument("--origin-confirmed", action="store_true", help=ORIGIN_HELP)
     p.add_argument("--seed", type=seed_type(), default=None, help=seed_help)
     p.add_argument("--time-scale", type=number_type(float), default=None,
                    help="emulated gantry: motion runs this much faster (default: 20)")
 
 
-def _cmd_status(args) -> int:
-    from nlosplan.hardware.status import run_status
-    from nlosplan.data.store import CaptureStore
-
-    with CaptureStore(args.store, readonly=True) as store:
-        rows = run_status(store, args.run)
-    lines = []
-    for r in rows:
-        planned = "?" if r["planned"] is None else r["planned"]
-        left = "?" if r["left"] is None else r["left"]
-        lines.append(f"{r['run_id']}: {r['captured']}/{planned} captured, {left} left ({r['plan']}; "
-                     f"{r['object']}, lights {'/'.join(r['lights'])}, {r['source']}; last {r['last_utc']})")
-        lines += [f"  missing step {m['step']}: ({m['x_mm']}, {m['y_mm']}) mm repeat {m['repeat']}"
-                  for m in r["missing"]]
-    emit(args, {"store": str(args.store), "runs": rows}, "\n".join(lines) or f"no rig runs in {args.store}")
-    return 0
-
-
 def add(sub):
-    """The ``rig`` group with ``capture``, ``dry-run`` and ``status``; returns the group's subparsers."""
+    """The ``rig`` group with ``capture``; returns the group's subparsers (the other commands add themselves)."""
     from nlosplan.cli.common import command_group
 
     rsub = command_group(sub, "rig", "drive the capture rig (TMF8828 + GRBL or Telemetrix gantry), or emulators",
@@ -419,7 +391,9 @@ def add(sub):
     _plan_options(c)
     c.add_argument("--class-group", default=None, help="class group of a non-DENALI object")
     c.add_argument("--lights", default="off", choices=["on", "off"], help="room lights during the run (default: off)")
-    c.add_argument("--no-park", action="store_true", help="do not park the gantry at the limits' minimum at the end")
+    c.add_argument("--no-park", action="store_true",
+                   help="do not park the gantry at the end (at the limits' minimum; a gantry that counts from where "
+                        "the port opened, Telemetrix or GRBL without homing, at that origin)")
     c.add_argument("--no-view-check", action="store_true",
                    help="skip the check that the object never enters the LiDAR's direct view (DENALI geometry)")
     c.add_argument("--pause-file", default=None, metavar="PATH",
@@ -430,15 +404,6 @@ def add(sub):
 
     add_live_option(c, "the run (rig map, last histograms, captures, faults)")
     c.set_defaults(func=_cmd_capture)
-    d = _sub(rsub, "dry-run", "list a plan's moves and check limits and direct view before anything moves")
-    _plan_options(d)
-    d.add_argument("--no-view-check", action="store_true", help="skip the direct-view check")
-    d.set_defaults(func=_cmd_dry_run)
-    s = _sub(rsub, "status", "what each rig run in a store has captured and what is left")
-    s.add_argument("--store", required=True, help="capture store")
-    s.add_argument("--run", default=None, help="one run id (default: every run)")
-    s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.set_defaults(func=_cmd_status)
     return rsub
 
 
@@ -455,5 +420,8 @@ are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
 --home). --emulate runs both devices as pty emulators (DENALI scene, fast
 simulator) driven by the same code, --emulate lidar or --emulate gantry one of
-them; emulated motion runs --time-scale times faster. docs/rig-connect.md: set-up
-and every error line."""
+them; emulated motion runs --time-scale times faster. A gantry that counts from
+where the carriage stood when the port opened (Telemetrix; GRBL without homing)
+parks at that origin, and when the store's last session did not end there the
+run asks to confirm the carriage is at the origin (--origin-confirmed) before
+it moves. docs/rig-connect.md: set-up and every error line."""

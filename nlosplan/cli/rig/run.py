@@ -162,7 +162,8 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
                          max_positions=args.budget)
     # what the rig CLI's opener (nlosplan.cli.rig.capture._open) reads besides the options above
     args.no_park, args.sensor_config = False, sensor
-    with rig_failures(run_id, args.store) as hold, CaptureStore(args.store) as store, _open(args, devices) as rig:
+    with rig_failures(run_id, args.store) as hold, CaptureStore(args.store) as store, \
+            _open(args, devices, store=store, run_id=run_id) as rig:
         ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx)
         summary = ex.run(plan)
     best = planner.best()

@@ -3,9 +3,11 @@
 The emulator thread owns the pty's master side: it reads what the driver
 writes, hands the bytes to the device logic, and writes the device's output
 without blocking (output waits in a queue while the driver is not reading:
-backpressure, like a USB serial link's flow control). Opening the port is
-seen as the master side's hang-up clearing, so a device can greet the
-driver the way an Arduino does after its open-time reset. The port name is a
+backpressure, like a USB serial link's flow control). Every open and close of
+the port is seen (inotify on the pty's device node; where that is missing,
+the master side's hang-up clearing, which misses a close and reopen within
+one tick), so a device can reset and greet the driver the way an Arduino
+does after its open-time (DTR) reset, every time. The port name is a
 symlink in a private folder, so a simulated unplug (:meth:`PtyDevice.disconnect`)
 can bring the device back on a new pty under the same name.
 """
@@ -13,9 +15,12 @@ can bring the device back on a new pty under the same name.
 from __future__ import annotations
 
 import abc
+import ctypes
+import ctypes.util
 import errno
 import os
 import select
+import struct
 import tempfile
 import threading
 import time
@@ -23,6 +28,43 @@ import tty
 from pathlib import Path
 
 __all__ = ["PtyDevice"]
+
+_IN_OPEN, _IN_CLOSE = 0x20, 0x08 | 0x10       # inotify: IN_OPEN, IN_CLOSE_WRITE | IN_CLOSE_NOWRITE
+
+
+def _inotify_open_close(path: str) -> int:
+    """A non-blocking inotify descriptor watching opens and closes of ``path``, or -1 where unavailable."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        fd = libc.inotify_init1(os.O_NONBLOCK | os.O_CLOEXEC)
+        if fd < 0:
+            return -1
+        if libc.inotify_add_watch(fd, path.encode(), _IN_OPEN | _IN_CLOSE) < 0:
+            os.close(fd)
+            return -1
+        return fd
+    except (OSError, AttributeError):
+        return -1
+
+
+def _open_close_events(fd: int) -> list[bool]:
+    """The pending events of :func:`_inotify_open_close`, in order: True for an open, False for a close."""
+    out = []
+    while True:
+        try:
+            buf = os.read(fd, 4096)
+        except BlockingIOError:
+            return out
+        except OSError:
+            return out
+        off = 0
+        while off + 16 <= len(buf):
+            _, mask, _, n = struct.unpack_from("iIII", buf, off)
+            off += 16 + n
+            if mask & _IN_OPEN:
+                out.append(True)
+            elif mask & _IN_CLOSE:
+                out.append(False)
 
 
 class PtyDevice(abc.ABC):
@@ -44,6 +86,7 @@ class PtyDevice(abc.ABC):
         self._lock = threading.RLock()
         self._out = bytearray()
         self._master = self._slave = -1
+        self._watch = -1
         self._stop = threading.Event()
         self._connected = threading.Event()
         self._thread: threading.Thread | None = None
@@ -58,21 +101,23 @@ class PtyDevice(abc.ABC):
         tmp = self._dir / f".{self.name}.new"
         if tmp.exists() or tmp.is_symlink():
             tmp.unlink()
-        tmp.symlink_to(os.ttyname(slave))
+        name = os.ttyname(slave)
+        tmp.symlink_to(name)
         tmp.replace(self.port)
         os.close(slave)  # only the driver holds the slave side: POLLHUP on the master means "not open"
+        self._watch = _inotify_open_close(name)
         self._master, self._slave = master, -1
         self._connected.set()
 
     def _close_pty(self) -> None:
         self._connected.clear()
-        for fd in (self._master, self._slave):
+        for fd in (self._master, self._slave, self._watch):
             if fd >= 0:
                 try:
                     os.close(fd)
                 except OSError:
                     pass
-        self._master = self._slave = -1
+        self._master = self._slave = self._watch = -1
         with self._lock:
             self._out.clear()
 
@@ -134,16 +179,18 @@ class PtyDevice(abc.ABC):
         return self
 
     def _run(self) -> None:
-        poller, registered, opened = None, -1, False
+        poller, registered, opened, opens = None, -1, False, 0
         while not self._stop.is_set():
             if not self._connected.is_set():
-                poller, registered, opened = None, -1, False
+                poller, registered, opened, opens = None, -1, False, 0
                 time.sleep(self.tick_s)
                 continue
-            master = self._master
+            master, watch = self._master, self._watch
             if registered != master:
                 poller, registered = select.poll(), master
                 poller.register(master, select.POLLIN)
+                if watch >= 0:
+                    poller.register(watch, select.POLLIN)
             with self._lock:
                 want_write = bool(self._out)
             poller.modify(master, select.POLLIN | (select.POLLOUT if want_write else 0))
@@ -153,10 +200,17 @@ class PtyDevice(abc.ABC):
                 time.sleep(self.tick_s)
                 continue
             mask = 0
-            for _, ev in events:
-                mask |= ev
+            for fd, ev in events:
+                if fd == master:
+                    mask |= ev
             hung = bool(mask & select.POLLHUP)
-            if hung != (not opened):  # the driver opened or closed the port
+            if watch >= 0:   # every open and close, in order (a close and reopen within one tick included)
+                for is_open in _open_close_events(watch):
+                    opens = opens + 1 if is_open else max(opens - 1, 0)
+                    if is_open and opens == 1 or not is_open and opens == 0 and opened:
+                        opened = opens > 0
+                        (self.on_open if opened else self.on_close)()
+            elif hung != (not opened):  # the driver opened or closed the port
                 opened = not hung
                 (self.on_open if opened else self.on_close)()
             if hung:

@@ -23,8 +23,8 @@ STRATEGIES = ("raster", "random", "active", "active-motion", "doptimal", "doptim
 
 def raster_order(points_mm) -> np.ndarray:
     """DENALI's snake over candidates: its 10 x 10 grid points by position index when all 100 are
-    candidates, else every candidate row by row (increasing y), alternating direction. Returns
-    candidate indices."""
+    candidates, else in DENALI's order over any lattice: column by column of gantry x (increasing), y
+    running up the first column and back down the next. Returns candidate indices."""
     from nlosplan.denali import grid_index
 
     pts = np.asarray(points_mm, dtype=np.float64)
@@ -32,11 +32,11 @@ def raster_order(points_mm) -> np.ndarray:
     if len(set(grid[grid >= 0].tolist())) == 100:
         on = np.flatnonzero(grid >= 0)
         return on[np.argsort(grid[on], kind="stable")]
-    rows = np.unique(np.round(pts[:, 1], 6))
+    cols = np.unique(np.round(pts[:, 0], 6))
     out = []
-    for k, y in enumerate(rows):
-        idx = np.flatnonzero(np.isclose(pts[:, 1], y, atol=1e-6))
-        idx = idx[np.argsort(pts[idx, 0] * (1 if k % 2 == 0 else -1), kind="stable")]
+    for k, x in enumerate(cols):
+        idx = np.flatnonzero(np.isclose(pts[:, 0], x, atol=1e-6))
+        idx = idx[np.argsort(pts[idx, 1] * (1 if k % 2 == 0 else -1), kind="stable")]
         out.extend(idx.tolist())
     return np.asarray(out, dtype=int)
 
