@@ -12,6 +12,7 @@ from typing import Callable
 from nlosplan.errors import UserError
 from nlosplan.progress import Progress
 from nlosplan.resources import MAX_SEED
+from nlosplan.schema import QUANTITIES, parse_int, parse_number, shown
 
 EXIT_USAGE = 2
 _INT_COLUMNS = ("position", "repeat")  # --where columns that take integers
@@ -30,14 +31,23 @@ def names_type(kind: str, allowed) -> Callable[[str], list[str]]:
     return parse
 
 
+def _number(text: str, cast):
+    """``text`` parsed strictly (ASCII digits only) as ``cast`` (int or float); ArgumentTypeError otherwise."""
+    try:
+        return parse_int(text) if cast is int else cast(parse_number(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def number_type(cast, *, zero_ok: bool = False, hi: float | None = None) -> Callable[[str], float]:
-    """An argparse type: a finite number > 0 (>= 0 with ``zero_ok``; at most ``hi`` when given)."""
+    """An argparse type: a finite number > 0 (>= 0 with ``zero_ok``; at most ``hi`` when given).
+
+    Written in ASCII digits (``1_0`` and other scripts' digits are refused). A flag named in
+    :data:`FLAG_QUANTITIES` is also held to its physical range (see :class:`Parser`).
+    """
 
     def parse(text: str):
-        try:
-            value = cast(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if cast is int else 'a number'}") from None
+        value = _number(text, cast)
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{text} is not a finite number")
         if not (value >= 0 if zero_ok else value > 0):
@@ -47,6 +57,45 @@ def number_type(cast, *, zero_ok: bool = False, hi: float | None = None) -> Call
         return value
 
     return parse
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: any finite number written in ASCII (what a bare ``type=float`` means here)."""
+    value = _number(text, float)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+    return value
+
+
+def strict_int(text: str) -> int:
+    """An argparse type: an integer in ASCII digits (what a bare ``type=int`` means here)."""
+    return _number(text, int)
+
+
+#: Flags that set a physical quantity, and which one (:data:`nlosplan.schema.QUANTITIES`): every value of such a
+#: flag, in every command, is held to that range when it is parsed, before any work.
+FLAG_QUANTITIES = {
+    "--jitter-ps": "jitter_fwhm_ps",
+    "--bin-width-ps": "bin_width_ps",
+    "--photon-scale": "photon_scale",
+    "--settle": "settle_s",
+    "--feed": "feed_mm_min",
+    "--time-scale": "time_scale",
+    "--limits": "gantry_mm",
+    "--target-rmse": "target_rmse_m",
+    "--object-albedo": "albedo",
+    "--diffuse-albedo": "albedo",
+    "--albedo": "albedo",
+}
+
+
+def _numbers(value):
+    """The numbers in a parsed value (a number, or nested lists/tuples of them)."""
+    if isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _numbers(v)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield value
 
 
 def seed_type():
@@ -59,9 +108,10 @@ def zones_type(text: str) -> tuple[int, int]:
     from nlosplan.sensor_models.config import MAX_ZONES_PER_AXIS
 
     try:
-        rows, cols = (int(v) for v in text.lower().split("x"))
+        rows, cols = (parse_int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} must look like 3x3 or 8x8 (rows x columns)") from None
+        raise argparse.ArgumentTypeError(f"{shown(text)} must look like 3x3 or 8x8 (rows x columns, ASCII digits)") \
+            from None
     if not (1 <= rows <= MAX_ZONES_PER_AXIS and 1 <= cols <= MAX_ZONES_PER_AXIS):
         raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: 1 to {MAX_ZONES_PER_AXIS} zones per axis")
     return rows, cols
@@ -76,10 +126,7 @@ def int_type(lo: int, hi: int | None = None):
     """An argparse type: an integer from ``lo`` to ``hi`` (no upper bound when None)."""
 
     def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        n = _number(text, int)
         if n < lo or (hi is not None and n > hi):
             raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: {lo} to {hi}" if hi is not None
                                              else f"{n} must be >= {lo}")
@@ -102,7 +149,7 @@ def parse_where(text: str | None) -> dict:
         values = [v.strip() for v in value.split("|") if v.strip()]
         if key in _INT_COLUMNS:
             try:
-                values = [int(v) for v in values]
+                values = [parse_int(v) for v in values]
             except ValueError:
                 raise UserError(f"--where {key}={value}: {key} takes integers") from None
         where[key] = values[0] if len(values) == 1 else values
@@ -111,7 +158,26 @@ def parse_where(text: str | None) -> dict:
 
 
 class Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line and exit 2."""
+    """ArgumentParser whose errors are one line and exit 2, and whose numbers are checked.
+
+    A bare ``type=int`` or ``type=float`` reads ASCII digits only (and a float must be finite); a flag of
+    :data:`FLAG_QUANTITIES` must lie within its physical range (every number of it, for a list or a pair).
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("type", int, strict_int)
+        self.register("type", float, finite_float)
+
+    def _get_value(self, action, arg_string):  # noqa: D401 - argparse API: one value of one flag
+        value = super()._get_value(action, arg_string)
+        names = [QUANTITIES[FLAG_QUANTITIES[o]] for o in action.option_strings if o in FLAG_QUANTITIES]
+        for q in names[:1]:
+            for v in _numbers(value):
+                if not math.isfinite(v) or not q.contains(v):
+                    raise argparse.ArgumentError(action, f"{arg_string if len(arg_string) <= 40 else f'{v:g}'} is "
+                                                         f"out of range; allowed: {q.allowed()}")
+        return value
 
     def error(self, message: str):  # noqa: D401 - argparse API
         raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")
