@@ -117,6 +117,31 @@ def zones_type(text: str) -> tuple[int, int]:
     return rows, cols
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM as an interrupt (exit 143): the cleanups of Ctrl-C (a rig run's finalize) run for it too."""
+
+
+@contextmanager
+def sigterm_interrupts():
+    """While the block runs, SIGTERM (a service manager's stop, ``kill``) raises :class:`Terminated` in the main
+    thread, like Ctrl-C raises KeyboardInterrupt: what cleans up after Ctrl-C cleans up after it."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise Terminated()
+
+    old = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
 def warn(message: str) -> None:
     """One ``nlosplan: warning: ...`` line on stderr (also with --json: stdout stays the result)."""
     print(f"nlosplan: warning: {message}", file=sys.stderr, flush=True)
