@@ -27,7 +27,7 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file", "check_plot_path",
+__all__ = ["PLOT_BYTES", "PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file", "check_plot_path",
            "check_free_space", "write_bytes", "write_json", "write_text", "save_npy", "writing"]
 
 #: Plot file types matplotlib writes without extra packages (the suffix picks the format).
@@ -214,9 +214,16 @@ def check_output_file(path, flag: str = "--out", *, suffixes: tuple[str, ...] | 
     return path
 
 
+#: Free space a figure needs (the largest figures nlosplan writes, e.g. the design report's, are ~0.18 MB).
+PLOT_BYTES = 2**20
+
+
 def check_plot_path(path, flag: str = "--plot") -> Path:
-    """:func:`check_output_file` for a figure: the suffix must be a format matplotlib writes."""
-    return check_output_file(path, flag, suffixes=PLOT_SUFFIXES)
+    """:func:`check_output_file` for a figure: the suffix must be a format matplotlib writes, and its disk must
+    have :data:`PLOT_BYTES` free (a full disk is found before the work, not when the figure is saved)."""
+    path = check_output_file(path, flag, suffixes=PLOT_SUFFIXES)
+    check_free_space(path, PLOT_BYTES, flag)
+    return path
 
 
 def check_output_dir(path, flag: str = "--out") -> Path:
@@ -242,7 +249,10 @@ def check_free_space(path, needed_bytes: float, flag: str = "--out") -> None:
     import shutil
 
     anc = _first_existing(Path(path))
-    free = shutil.disk_usage(anc if anc.is_dir() else anc.parent).free
+    try:
+        free = shutil.disk_usage(anc if anc.is_dir() else anc.parent).free
+    except OSError:   # a file system that cannot say: the write itself will tell
+        return
     if needed_bytes > free:
         raise UserError(f"{flag} {path}: the output needs about {_size(needed_bytes)} but only {_size(free)} is free "
                         f"on that disk; free some space or choose another place")
