@@ -142,6 +142,16 @@ QUANTITIES: dict[str, Quantity] = {
     "time_scale": Quantity(0.1, 10_000.0, "", "how much faster an emulated gantry moves"),
     "gantry_mm": Quantity(-10_000.0, 10_000.0, "mm", "a gantry coordinate: limits, work offset (within 10 m)"),
     "position_m": Quantity(-100.0, 100.0, "m", "a position label"),
+    "scene_m": Quantity(-100.0, 100.0, "m", "a coordinate or size in a scene"),
+    "distance_m": Quantity(0.0, 100.0, "m", "a distance in a scene", lo_open=True),
+    "min_distance_m": Quantity(0.0, 100.0, "m", "the nearest capture scored"),
+    "object_size_m": Quantity(0.0, 10.0, "m", "a hidden object's size", lo_open=True),
+    "angle_deg": Quantity(-360.0, 360.0, "deg", "a turn or tilt"),
+    "wall_samples": Quantity(1, 256, "", "sub-rays per zone axis (the wall scene's fidelity)"),
+    "seconds": Quantity(0.01, 3600.0, "s", "a timed duration"),
+    "budget_s": Quantity(0.01, 1e7, "s", "a wall-clock budget"),
+    "model_width": Quantity(0.01, 16.0, "", "a model size factor (1: the paper's)"),
+    "threads": Quantity(1, 1024, "", "CPU threads"),
     "target_rmse_m": Quantity(0.0, 10.0, "m", "a localization RMSE target", lo_open=True),
 }
 

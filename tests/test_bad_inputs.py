@@ -78,6 +78,7 @@ def fx(tmp_path_factory):
         for i in range(2):
             np.save(f / f"{i:03d}.npy", arr)
     (d / "den_empty" / "README_folder").mkdir(parents=True)
+    _issue39_files(d)
     # design TOMLs with wrong types (checked when the file is read)
     tiny = ('[space]\nzones = ["1x1", "3x3"]\nbin_factors = [1, 2]\naxes = ["zones", "jitter_fwhm_ps"]\n'
             "[search]\ngrid_points = 3\nrefine_steps = 1\nseeds = 1\ncandidates = 1\noptimize_evals = 4\n"
@@ -92,6 +93,46 @@ def fx(tmp_path_factory):
     for p in d.rglob("*"):  # chmod'ed fixtures must stay removable
         if p.is_dir():
             os.chmod(p, 0o755)
+
+
+def _issue39_files(d: Path) -> None:
+    """Issue 39's files: numbers out of range, nesting and keys a parser chokes on, FIFOs, damaged stores."""
+    import sqlite3
+
+    (d / "bw_huge.toml").write_text('base = "tmf8828-3x3-short"\nbin_width_ps = 1e308\n')
+    (d / "dup.json").write_text('{"base": "tmf8828-3x3-short", "n_bins": 64, "n_bins": 32}')
+    deep = "[" * 100_000 + "]" * 100_000
+    (d / "deep.json").write_text('{"base": ' + deep + "}")
+    (d / "deep.toml").write_text("base = " + deep + "\n")
+    (d / "deep_plan.json").write_text(deep)
+    (d / "deep_rig.toml").write_text("[telemetrix]\norigin_mm = " + deep + "\n")
+    (d / "pos_nan.json").write_text('{"frame0_tag1": [NaN, 0.3], "frame1_tag1": [0.1, 0.3]}')
+    (d / "pos_huge.json").write_text('{"frame0_tag1": [1e308, 0.3], "frame1_tag1": [0.1, 0.3]}')
+    for name in ("fifo.sqlite", "fifo.toml"):
+        os.mkfifo(d / name)
+    for name, sql in (("nosensors", "DROP TABLE sensors"),
+                      ("badblob", "UPDATE captures SET data = substr(data, 1, 100) WHERE id = 3"),
+                      ("baddtype", "UPDATE captures SET dtype = '<f8' WHERE id = 3"),
+                      # the issue's -9.18e18: 0x80 bytes where counts were
+                      ("negcount", "UPDATE captures SET data = X'" + "80" * 16 + "' || substr(data, 17) WHERE id = 3")):
+        shutil.copy(d / "store.sqlite", d / f"{name}.sqlite")
+        db = sqlite3.connect(d / f"{name}.sqlite")
+        db.execute("PRAGMA foreign_keys = OFF")
+        db.execute("PRAGMA ignore_check_constraints = ON")
+        db.execute(sql)
+        db.commit()
+        db.close()
+    # a corrupt page mid-file (SQLite's quick check finds it; the counts read through it were -9.18e18)
+    with CaptureStore(d / "corrupt.sqlite") as st:
+        rng = np.random.default_rng(2)
+        st.put_many([(rng.poisson(40, (3, 3, 128)), dict(object="A", size="8in", position=p, lights="off", repeat=r,
+                                                       source="sim:fast", x=0.01 * p, y=0.3))
+                     for p in range(50) for r in range(3)], sensor=preset("tmf8828-3x3-short"))
+    with open(d / "corrupt.sqlite", "r+b") as fh:
+        fh.seek(2 * 4096)
+        fh.write(bytes(np.random.default_rng(3).integers(0, 256, 4096, dtype=np.uint8)))
+    with pytest.raises(Exception, match="quick check"):
+        CaptureStore(d / "corrupt.sqlite", readonly=True, check=True)
 
 
 @pytest.fixture(scope="module")
@@ -150,6 +191,8 @@ DESIGN_TOMLS = {
     "objects_bad": ('objects = ["A", "S", "circle"]', 'objects = ["nope"]'),
     "epochs_str": ("epochs = 4", 'epochs = "four"'),
     "lights_dim": ('fidelity = "draft"', 'fidelity = "draft"\nlights = "dim"'),
+    "jitter_huge": ("[space]\n", "[space]\njitter_fwhm_ps = [0, 1e308]\n"),
+    "deep": ("[space]\n", "[space]\naxes = " + "[" * 5000 + "]" * 5000 + "\n"),
 }
 
 SIM = ["simulate", "--fidelity", "draft"]
@@ -159,6 +202,7 @@ BUILD = ["dataset", "build", "--objects", "A", "--sizes", "8in", "--positions", 
 BENCH = ["benchmark", "--models", "mlp", "--tasks", "size", "--small"]
 OBS = ["evaluate", "observer", "shape", "--objects", "A,S", "--positions", "0-1", "--fidelity", "draft"]
 CRLB = ["evaluate", "crlb", "--objects", "A", "--positions", "0-1", "--fidelity", "draft"]
+RIG = ["rig", "capture", "--emulate", "--positions", "0", "--repeats", "1"]
 
 # (id, argv with {F} for the fixture folder, words the error line must hold, paths that must not change,
 #  paths that must not exist afterwards)
@@ -199,7 +243,7 @@ CASES = [
     ("sim-position", SIM + ["--position", "100"], "position", (), ()),
     ("sim-object", SIM + ["--object", "nope"], "nope", (), ()),
     ("sim-only-zones", SIM + ["--only-zones", "x"], "--only-zones 'x' must be ROW,COL pairs", (), ()),
-    ("sim-wall-samples", ["simulate", "--scene", "wall", "--samples", "0"], "--samples 0 must be >= 1", (), ()),
+    ("sim-wall-samples", ["simulate", "--scene", "wall", "--samples", "0"], "argument --samples: 0 is out of range; allowed: 1 to 256", (), ()),
     ("sim-wall-other-flag", ["simulate", "--scene", "wall", "--position", "3"], "applies only to --scene denali",
      (), ()),
     ("sim-mitsuba-explain", ["simulate", "--backend", "mitsuba", "--explain"], "--explain applies to the fast", (), ()),
@@ -263,7 +307,7 @@ CASES = [
     ("import-store-inside-file", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/afile/i.sqlite"],
      "afile is a file", ("{F}/afile",), ()),
     ("import-positions-binary", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i8.sqlite",
-                                 "--positions-json", "{F}/bin.json"], "not a tag1_positions.json", (),
+                                 "--positions-json", "{F}/bin.json"], "bin.json is a binary file, not text", (),
      ("{F}/i8.sqlite",)),
     ("import-sensor-empty", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i9.sqlite", "--sensor",
                              "{F}/empty.toml"], "the file is empty", (), ("{F}/i9.sqlite",)),
@@ -338,7 +382,10 @@ CASES = [
                       ("repeats_float", "[scenes]: repeats = 1.5 must be an integer >= 1"),
                       ("objects_bad", '[scenes]: objects = ["nope"] must be a non-empty list'),
                       ("epochs_str", '[search.fidelity.trained]: epochs = "four" must be an integer'),
-                      ("lights_dim", "[scenes]: lights = \"dim\" must be one of 'off', 'on'"))],
+                      ("lights_dim", "[scenes]: lights = \"dim\" must be one of 'off', 'on'"),
+                      ("jitter_huge", "[space]: jitter_fwhm_ps = [0, 1e+308] must be [low, high] with low <= high, "
+                                      "each a number from 0 to 1e+07 ps"),
+                      ("deep", "d_deep.toml: space.axes is nested deeper than 32 levels"))],
     ("design-where-no-real", DESIGN + ["--config", "{F}/tiny.toml", "--where", "lights=off", "--out", "{F}/d1"],
      "--where applies only with --real STORE", (), ("{F}/d1",)),
     ("design-capture-sensor-no-real", DESIGN + ["--capture-sensor", "tmf8828-3x3-short", "--out", "{F}/d1"],
@@ -364,6 +411,77 @@ CASES = [
     ("design-out-file", DESIGN + ["--out", "{F}/afile"], "--out {F}/afile is a file", ("{F}/afile",), ()),
     ("design-out-inside-file", DESIGN + ["--out", "{F}/afile/d"], "afile is a file, not a folder", ("{F}/afile",), ()),
     ("design-requirement", DESIGN + ["--requirement", "speed<=3"], "must look like loc<=0.05", (), ()),
+    # ---- issue 39: numbers (strict ASCII, physical ranges), files (depth, duplicates, FIFOs), damaged stores
+    ("sim-binwidth-tiny", SIM + ["--bin-width-ps", "1e-300"],
+     "argument --bin-width-ps: 1e-300 is out of range; allowed: 1 to 1e+06 ps", (), ()),
+    ("sim-binwidth-huge", SIM + ["--bin-width-ps", "1e308"], "argument --bin-width-ps: 1e308 is out of range", (), ()),
+    ("sim-jitter-huge", SIM + ["--jitter-ps", "1e308"],
+     "argument --jitter-ps: 1e308 is out of range; allowed: 0 to 1e+07 ps", (), ()),
+    ("sim-zones-arabic", SIM + ["--zones", "\u0663x\u0663"], "argument --zones: '\u0663x\u0663' must look like 3x3", (), ()),
+    ("sim-repeats-underscore", SIM + ["--repeats", "1_0"],
+     "argument --repeats: '1_0' is not an integer (ASCII digits only)", (), ()),
+    ("sim-sensor-binwidth-huge", SIM + ["--sensor", "{F}/bw_huge.toml"],
+     "bw_huge.toml: bin_width_ps=1e+308 is out of range; allowed: 1 to 1e+06 ps", (), ()),
+    ("sensor-show-binwidth-huge", ["sensor", "show", "{F}/bw_huge.toml"], "bin_width_ps=1e+308 is out of range", (),
+     ()),
+    ("sensor-show-dup-key", ["sensor", "show", "{F}/dup.json"],
+     "dup.json: the key 'n_bins' is given twice in one object", (), ()),
+    ("sensor-show-deep-json", ["sensor", "show", "{F}/deep.json"],
+     "sensor file {F}/deep.json: base is nested deeper than 32 levels", (), ()),
+    ("sensor-show-deep-toml", ["sensor", "show", "{F}/deep.toml"],
+     "sensor file {F}/deep.toml: base is nested deeper than 32 levels", (), ()),
+    ("sensor-show-fifo", ["sensor", "show", "{F}/fifo.toml"], "fifo.toml is a FIFO (named pipe), not a regular file",
+     (), ()),
+    ("dry-run-plan-deep", ["rig", "dry-run", "--plan", "{F}/deep_plan.json"],
+     "positions file {F}/deep_plan.json: the top level is nested deeper than 32 levels", (), ()),
+    ("capture-rig-file-deep", ["rig", "capture", "--emulate", "--gantry-kind", "telemetrix", "--rig-file",
+                               "{F}/deep_rig.toml", "--store", "{F}/r0.db"],
+     "rig file {F}/deep_rig.toml: telemetrix.origin_mm is nested deeper than 32 levels", (), ("{F}/r0.db",)),
+    ("dry-run-limits-huge", ["rig", "dry-run", "--limits", "0:1e308,0:320"],
+     "argument --limits: 0:1e308,0:320 is out of range; allowed: -10000 to 10000 mm", (), ()),
+    ("capture-run-empty", RIG + ["--run", "", "--store", "{F}/r1.db"], "argument --run: '': a run id is 1 to 200", (),
+     ("{F}/r1.db",)),
+    ("capture-faults-nan", RIG + ["--emulate-faults", "drop=nan", "--store", "{F}/r1.db"],
+     "argument --emulate-faults: fault drop=nan is out of range", (), ("{F}/r1.db",)),
+    ("capture-settle-huge", RIG + ["--settle", "1e308", "--store", "{F}/r1.db"],
+     "argument --settle: 1e308 is out of range; allowed: 0 to 3600 s", (), ("{F}/r1.db",)),
+    ("capture-feed-tiny", RIG + ["--feed", "1e-300", "--store", "{F}/r1.db"],
+     "argument --feed: 1e-300 is out of range; allowed: 1 to 100000 mm/min", (), ("{F}/r1.db",)),
+    ("capture-work-offset-huge", RIG + ["--work-offset", "1e308,0", "--store", "{F}/r1.db"],
+     "--work-offset X=1e+308 is out of range; allowed: -10000 to 10000 mm", (), ("{F}/r1.db",)),
+    ("capture-time-scale-huge", RIG + ["--time-scale", "1e308", "--store", "{F}/r1.db"],
+     "argument --time-scale: 1e308 is out of range; allowed: 0.1 to 10000", (), ("{F}/r1.db",)),
+    ("run-run-empty", ["rig", "run", "--emulate", "--run", "", "--store", "{F}/r1.db", "--out", "{F}/rr"],
+     "argument --run: '': a run id is 1 to 200", (), ("{F}/r1.db", "{F}/rr")),
+    ("import-positions-nan", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i10.sqlite",
+                              "--positions-json", "{F}/pos_nan.json"],
+     "positions file {F}/pos_nan.json: frame0_tag1 x=nan must be finite", (), ("{F}/i10.sqlite",)),
+    ("import-positions-huge", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i10.sqlite",
+                               "--positions-json", "{F}/pos_huge.json"],
+     "frame0_tag1 x=1e+308 is out of range; allowed: -100 to 100 m", (), ("{F}/i10.sqlite",)),
+    ("crlb-photon-huge", CRLB + ["--photon-scale", "1e300"],
+     "argument --photon-scale: 1e300 is out of range; allowed: 0 to 1e+12", (), ()),
+    ("info-fifo", ["dataset", "info", "--store", "{F}/fifo.sqlite"],
+     "capture store {F}/fifo.sqlite is a FIFO (named pipe), not a regular file", (), ()),
+    ("status-fifo", ["rig", "status", "--store", "{F}/fifo.sqlite"], "fifo.sqlite is a FIFO (named pipe)", (), ()),
+    ("build-fifo", BUILD + ["--store", "{F}/fifo.sqlite"], "fifo.sqlite is a FIFO (named pipe)", (), ()),
+    *[(f"{cmd}-no-sensors", argv + ["--store", "{F}/nosensors.sqlite"],
+       "capture store {F}/nosensors.sqlite is damaged: it has no sensors table", ("{F}/nosensors.sqlite",), ())
+      for cmd, argv in (("info", ["dataset", "info"]), ("status", ["rig", "status"]),
+                        ("export", ["dataset", "export-denali", "--out", "{F}/e3"]))],
+    ("status-blob-size", ["rig", "status", "--store", "{F}/badblob.sqlite"],
+     "is damaged: its histogram holds 100 bytes, 9216 expected for shape [3, 3, 128] of <i8", ("{F}/badblob.sqlite",),
+     ()),
+    ("export-blob-size", ["dataset", "export-denali", "--store", "{F}/badblob.sqlite", "--out", "{F}/e4"],
+     "capture 3 (A|8in|1|off|3x3|0|sim:fast|", ("{F}/badblob.sqlite",), ("{F}/e4",)),
+    ("export-blob-dtype", ["dataset", "export-denali", "--store", "{F}/baddtype.sqlite", "--out", "{F}/e5"],
+     "its histogram dtype '<f8' is not one of <i8, <f4", ("{F}/baddtype.sqlite",), ("{F}/e5",)),
+    ("export-negative-count", ["dataset", "export-denali", "--store", "{F}/negcount.sqlite", "--out", "{F}/e6"],
+     "a count of -9187201950435737472 is negative", ("{F}/negcount.sqlite",), ("{F}/e6",)),
+    ("export-corrupt-page", ["dataset", "export-denali", "--store", "{F}/corrupt.sqlite", "--out", "{F}/e7"],
+     "capture store {F}/corrupt.sqlite is damaged (SQLite's quick check:", ("{F}/corrupt.sqlite",), ("{F}/e7",)),
+    ("serve-corrupt-page", ["serve", "{F}/corrupt.sqlite", "--port", "0"], "is damaged (SQLite's quick check:",
+     ("{F}/corrupt.sqlite",), ()),
     # ---- the command itself
     ("no-command", [], "give a command: design, sensor, simulate", (), ()),
     ("bad-command", ["bogus-command"], "invalid choice: 'bogus-command'", (), ()),

@@ -86,6 +86,18 @@ FLAG_QUANTITIES = {
     "--object-albedo": "albedo",
     "--diffuse-albedo": "albedo",
     "--albedo": "albedo",
+    "--wall-distance": "distance_m",
+    "--distance": "distance_m",
+    "--min-distance": "min_distance_m",
+    "--object-size": "object_size_m",
+    "--object-yaw": "angle_deg",
+    "--yaw": "angle_deg",
+    "--pitch": "angle_deg",
+    "--samples": "wall_samples",
+    "--seconds": "seconds",
+    "--max-seconds": "budget_s",
+    "--width": "model_width",
+    "--threads": "threads",
 }
 
 

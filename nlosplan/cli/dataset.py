@@ -7,6 +7,7 @@ from contextlib import contextmanager
 
 from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, seed_type, sub_parser
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int
 
 
 # ----------------------------------------------------------------- option values
@@ -37,7 +38,7 @@ def _positions(text: str) -> list[int]:
     for tok in (t.strip() for t in text.split(",")):
         lo, sep, hi = tok.partition("-")
         try:
-            a, b = int(lo), int(hi if sep else lo)
+            a, b = parse_int(lo), parse_int(hi if sep else lo)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{tok!r} is not a position N or a range N-M "
                                              "(e.g. 0-99 or 0,5,9)") from None

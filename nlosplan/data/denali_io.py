@@ -375,7 +375,8 @@ def export_denali(store, root, *, overwrite: bool = False, progress: Progress | 
     UserError
         Nothing matches; two captures would share a file slot (filter by
         ``source``, ``sensor_hash`` or ``seed``); a scene's repeats are not
-        0..R-1; a capture lacks x, y; labels the layout cannot name.
+        0..R-1; a capture lacks x, y; labels the layout cannot name; a
+        damaged capture (checked before anything is written).
     """
     labels = store.labels(**where)
     labels = labels[labels["repeat"] >= 0]
@@ -397,6 +398,8 @@ def export_denali(store, root, *, overwrite: bool = False, progress: Progress | 
     pos = labels.groupby("position")[["x", "y"]].nunique()
     if (pos > 1).any().any():
         raise UserError(f"positions {sorted(pos.index[(pos > 1).any(axis=1)])} have several (x, y) labels")
+    for _ in store.iter_captures(**where):   # every histogram checked before the first file: a damaged one is one
+        pass                                 # line naming it, and nothing is written
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     inv_sizes, inv_lights = {v: k for k, v in _SIZES.items()}, {v: k for k, v in _LIGHTS.items()}

@@ -77,6 +77,11 @@ __all__ = ["Added", "Capture", "CaptureStore", "LOCK_WAIT_S", "SCHEMA_VERSION", 
 LOCK_WAIT_S = 2.0
 
 
+#: A capture's histogram as bytes whatever SQLite holds there (a damaged or edited row may hold text, which
+#: sqlite3 would fail to decode): its size and values are then checked (:func:`decode_histogram`).
+_DATA = "CAST(c.data AS BLOB)"
+
+
 def _locked(exc: sqlite3.Error) -> bool:
     return "locked" in str(exc) or "busy" in str(exc)
 
@@ -509,7 +514,7 @@ class CaptureStore:
                                 "filter by zones= or sensor_hash=")
             shape, bin_width = tuple(json.loads(kinds[0][0])), float(kinds[0][1])
             out = np.empty((len(labels),) + shape, np.float32)
-            rows = db.execute(f"SELECT c.id, c.key, c.sensor_hash, c.dtype, c.shape, c.data FROM captures c{sql} "
+            rows = db.execute(f"SELECT c.id, c.key, c.sensor_hash, c.dtype, c.shape, {_DATA} FROM captures c{sql} "
                               "ORDER BY c.id", vals)
             counts = np.zeros(len(labels), bool)   # rows of integer counts (the others: float expectations)
             sizes = {d: int(np.prod(shape)) * DTYPES[d].itemsize for d in DTYPES}
@@ -532,7 +537,8 @@ class CaptureStore:
             i = int(np.argmax(bad))
             cid = int(labels["id"].iloc[i])
             dtype, shape, data, key, h = self._conn().execute(
-                "SELECT dtype, shape, data, key, sensor_hash FROM captures WHERE id = ?", (cid,)).fetchone()
+                f"SELECT c.dtype, c.shape, {_DATA}, c.key, c.sensor_hash FROM captures c WHERE c.id = ?",
+                (cid,)).fetchone()
             decode_histogram(dtype, shape, data, what=self._what(cid, key), max_count=self._max_count(h))
             raise UserError(f"{self._what(cid, key)} is damaged: its histogram holds values no sensor gives")
 
@@ -540,7 +546,7 @@ class CaptureStore:
         """The matching captures one at a time, ordered by id (histograms in their stored dtype)."""
         sql, vals = where_sql(where)
         q = (f"SELECT {self._LABELS}, c.key, c.scene, c.backend, c.fidelity, c.created_utc, c.meta, c.dtype, c.shape, "
-             f"c.data FROM captures c{sql} ORDER BY c.id")
+             f"{_DATA} FROM captures c{sql} ORDER BY c.id")
         names = list(LABEL_COLUMNS) + ["id", "sensor_hash", "seed", "variant", "capture_id"]
         for row in self._conn().execute(q, vals):
             lab = dict(zip(names, row[: len(names)]))

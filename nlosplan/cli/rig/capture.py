@@ -11,6 +11,7 @@ from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, number_type, progress_bar, seed_type, sigterm_interrupts
 from nlosplan.errors import UserError
+from nlosplan.schema import check_quantity, parse_int, parse_number
 
 EXAMPLES = {
     "capture": (
@@ -49,7 +50,7 @@ def _range_list(text: str) -> list[int]:
             continue
         lo, sep, hi = part.partition("-")
         try:
-            a, b = int(lo), int(hi) if sep else int(lo)
+            a, b = parse_int(lo), parse_int(hi) if sep else parse_int(lo)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r}: use grid indices like 0-9,20,45") from None
         if not (0 <= a <= b <= 99):
@@ -62,7 +63,7 @@ def _range_list(text: str) -> list[int]:
 
 def _limits(text: str):
     try:
-        (x0, x1), (y0, y1) = [tuple(float(v) for v in axis.split(":")) for axis in text.split(",")]
+        (x0, x1), (y0, y1) = [tuple(parse_number(v) for v in axis.split(":")) for axis in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: use XMIN:XMAX,YMIN:YMAX in mm, e.g. 0:320,0:320") from None
     if not (x0 < x1 and y0 < y1):
@@ -71,8 +72,6 @@ def _limits(text: str):
 
 
 def _faults(text: str) -> dict:
-    from nlosplan.schema import parse_number
-
     out = {}
     for item in text.split(","):
         if not item.strip():
@@ -360,7 +359,6 @@ def resolve_devices(args, *, seed_is_noise: bool) -> dict:
 def _work_offset(text):
     """``--work-offset``: auto, keep or X,Y in mm, each within the gantry's range (before anything connects)."""
     from nlosplan.hardware.grbl_frame import parse_work_offset
-    from nlosplan.schema import check_quantity, parse_number
 
     if str(text).strip().lower() in ("auto", "keep"):
         return parse_work_offset(text)

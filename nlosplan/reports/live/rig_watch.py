@@ -200,7 +200,7 @@ class RigWatch:
         return bool(rows)
 
     def _read_hist(self, cid: int) -> None:
-        row = self._db.execute("SELECT dtype, shape, data, capture_id, zones FROM captures WHERE id = ?",
+        row = self._db.execute("SELECT dtype, shape, CAST(data AS BLOB), capture_id, zones FROM captures WHERE id = ?",
                                (cid,)).fetchone()
         if row is None:
             return
