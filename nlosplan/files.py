@@ -27,7 +27,8 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["PLOT_BYTES", "PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file", "check_plot_path",
+__all__ = ["PLOT_BYTES", "PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file",
+           "check_plot_path",
            "check_free_space", "write_bytes", "write_json", "write_text", "save_npy", "writing"]
 
 #: Plot file types matplotlib writes without extra packages (the suffix picks the format).

@@ -109,7 +109,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"nlosplan: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:   # a rig run says where it stopped and what finalize did
-        _ignore_signals()              # a second Ctrl-C while this line is written changes nothing
+        if argv is None:               # the program: a second Ctrl-C while this line is written changes nothing
+            _ignore_signals()
         what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
         print(f"nlosplan: {what}{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
         return 143 if isinstance(exc, Terminated) else 130

@@ -194,6 +194,11 @@ def _histogram_bytes(hist, sensor: SensorConfig) -> tuple[str, list, bytes]:
         raise UserError(f"histogram shape {a.shape} does not match the sensor {sensor.name!r} {expected}")
     if np.issubdtype(a.dtype, np.integer):
         dtype = "<i8"
+        top = MAX_COUNT_24BIT if sensor.saturation else None   # what reading it back accepts
+        if a.size and (a.min() < 0 or (top is not None and a.max() > top)):
+            bad = a.min() if a.min() < 0 else a.max()
+            raise UserError(f"histogram count {int(bad)} is outside 0 to {top if top is not None else 'any'}"
+                            + (" (the sensor saturates at 24 bits)" if top is not None else ""))
     elif np.issubdtype(a.dtype, np.floating):
         dtype = "<f4"
         if not np.all(np.isfinite(a)):
@@ -210,7 +215,8 @@ def capture_row(hist, labels: dict, sensor: SensorConfig, meta: dict | None) -> 
     ------
     UserError
         Unknown or missing labels, lights not on/off, zones or histogram shape
-        unlike the sensor's, non-finite values, metadata that is not JSON.
+        unlike the sensor's, non-finite values, counts below 0 or above the
+        24-bit maximum (of a sensor that saturates), metadata that is not JSON.
     """
     lab = _check_labels(labels, sensor)
     dtype, shape, data = _histogram_bytes(hist, sensor)
