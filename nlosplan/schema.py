@@ -52,10 +52,12 @@ _NUMBER_TEXT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)
                           re.ASCII | re.IGNORECASE)
 
 
-def shown(text, limit: int = 40) -> str:
-    """``text`` quoted for a message, cut to ``limit`` characters (a message never carries a huge value)."""
-    text = str(text)
-    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} characters)"
+def shown(value, limit: int = 40) -> str:
+    """``value`` for a message (a string quoted), cut to ``limit`` characters: a message never carries a huge value."""
+    text = value if isinstance(value, str) else repr(value)
+    if len(text) <= limit:
+        return repr(value) if isinstance(value, str) else text
+    return repr(text[:limit]) + f"... ({len(text)} characters)"
 
 
 def parse_int(text: str) -> int:
@@ -206,7 +208,7 @@ def regular_file(path, what: str = "file") -> os.stat_result:
     return st
 
 
-def read_text(path, what: str = "file") -> str:
+def read_text(path, what: str = "file", *, max_bytes: int = MAX_FILE_BYTES) -> str:
     """The UTF-8 text of ``path``; UserError (one line) when it cannot be read as text.
 
     Parameters
@@ -214,12 +216,14 @@ def read_text(path, what: str = "file") -> str:
     path : str or Path
     what : str
         What the file is, for the message (e.g. ``"sensor file"``).
+    max_bytes : int
+        Largest file read (a configuration file: :data:`MAX_FILE_BYTES`; data files may allow more).
     """
     p = Path(path)
     st = regular_file(p, what)
-    if st.st_size > MAX_FILE_BYTES:
-        raise UserError(f"{what} {p} holds {st.st_size / 2**20:.0f} MB; a configuration file may hold at most "
-                        f"{MAX_FILE_BYTES // 2**20} MB")
+    if st.st_size > max_bytes:
+        raise UserError(f"{what} {p} holds {st.st_size / 2**20:.0f} MB; it may hold at most "
+                        f"{max_bytes // 2**20} MB")
     try:
         data = p.read_bytes()
     except IsADirectoryError:

@@ -101,6 +101,12 @@ FLAG_QUANTITIES = {
 }
 
 
+#: Flags that name a file or folder: an empty value is refused when parsed (it would silently mean the current
+#: folder, or nothing). So is an empty ``--out DIR`` (a folder; ``calibrate --out ''`` means no file).
+PATH_FLAGS = ("--out", "--store", "--sensor", "--config", "--plan", "--rig-file", "--positions-json", "--real",
+              "--planner", "--pause-file", "--capture-sensor")
+
+
 def _numbers(value):
     """The numbers in a parsed value (a number, or nested lists/tuples of them)."""
     if isinstance(value, (list, tuple)):
@@ -198,7 +204,8 @@ class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line and exit 2, and whose numbers are checked.
 
     A bare ``type=int`` or ``type=float`` reads ASCII digits only (and a float must be finite); a flag of
-    :data:`FLAG_QUANTITIES` must lie within its physical range (every number of it, for a list or a pair).
+    :data:`FLAG_QUANTITIES` must lie within its physical range (every number of it, for a list or a pair); a
+    flag of :data:`PATH_FLAGS` must not be empty.
     """
 
     def __init__(self, *args, **kwargs):
@@ -207,6 +214,9 @@ class Parser(argparse.ArgumentParser):
         self.register("type", float, finite_float)
 
     def _get_value(self, action, arg_string):  # noqa: D401 - argparse API: one value of one flag
+        if arg_string == "" and (any(o in PATH_FLAGS for o in action.option_strings)
+                                 or ("--out" in action.option_strings and action.metavar in ("DIR", "ROOT"))):
+            raise argparse.ArgumentError(action, "give a path (it is empty)")
         value = super()._get_value(action, arg_string)
         names = [QUANTITIES[FLAG_QUANTITIES[o]] for o in action.option_strings if o in FLAG_QUANTITIES]
         for q in names[:1]:

@@ -177,9 +177,12 @@ class SensorConfig:
                 raise UserError(bad) from None
             if shape.size == 0 or not np.all(np.isfinite(shape)) or np.any(shape < 0):
                 raise UserError(bad)
-            total = float(shape.sum())
+            total = float(shape.sum()) if shape.max() < 1e300 else math.inf
             if total <= 0:
                 raise UserError("pulse_shape must have a positive sum")
+            if not math.isfinite(total):   # samples whose sum overflows: the shape is relative, scale it first
+                shape = shape / shape.max()
+                total = float(shape.sum())
             if abs(total - 1.0) > 1e-12:  # normalise once; re-normalising would drift in the last digit
                 shape = shape / total
             object.__setattr__(self, "pulse_shape", tuple(float(v) for v in shape))
