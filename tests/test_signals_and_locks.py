@@ -289,3 +289,26 @@ def test_a_corrupt_page_is_found_by_the_quick_check_and_a_sound_store_passes(fx)
         CaptureStore(fx / "corrupt.sqlite", readonly=True, check=True)
     with CaptureStore(fx / "store.sqlite", readonly=True, check=True) as st:
         assert st.count() == 16
+
+
+def test_the_live_page_says_a_damaged_capture_instead_of_failing(tmp_path):
+    """The rig page reads the newest capture of the run: a damaged one is its error line, not a 500 per load."""
+    from nlosplan.reports.live.rig_watch import RigWatch
+
+    path = tmp_path / "s.sqlite"
+    with CaptureStore(path) as st:
+        for step in range(2):
+            st.put(np.full((3, 3, 128), 7), dict(object="A", size="8in", position=step, lights="off", repeat=0,
+                                                 source="emulated:rig", capture_id=f"r/{step:06d}"),
+                   sensor=SensorConfig(name="s"), meta={"run_id": "r", "step": step})
+    db = sqlite3.connect(path)
+    db.execute("UPDATE captures SET data = substr(data, 1, 100) WHERE id = 2")
+    db.commit()
+    db.close()
+    watch = RigWatch(path, min_interval_s=0)
+    try:
+        assert watch.refresh(force=True)
+        assert watch.last_hist is None and len(watch.runs["r"]) == 2
+        assert watch.error.startswith("capture 2 is damaged: its histogram holds 100 bytes, 9216 expected")
+    finally:
+        watch.close()

@@ -103,7 +103,7 @@ FLAG_QUANTITIES = {
 
 #: Flags that name a file or folder: an empty value is refused when parsed (it would silently mean the current
 #: folder, or nothing). So is an empty ``--out DIR`` (a folder; ``calibrate --out ''`` means no file).
-PATH_FLAGS = ("--out", "--store", "--sensor", "--config", "--plan", "--rig-file", "--positions-json", "--real",
+PATH_FLAGS = ("--store", "--sensor", "--config", "--plan", "--rig-file", "--positions-json", "--real",
               "--planner", "--pause-file", "--capture-sensor")
 
 

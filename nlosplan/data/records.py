@@ -48,8 +48,9 @@ INSERT_COLUMNS = ("key", "object", "size", "class_group", "position", "x", "y", 
                   "sensor_hash", "seed", "variant", "capture_id", "scene", "backend", "fidelity", "created_utc", "meta",
                   "dtype", "shape", "data")
 DTYPES = {"<i8": np.dtype("<i8"), "<f4": np.dtype("<f4")}
-#: The tables every store has.
-TABLES = ("sensors", "captures")
+#: The tables every store has, with the columns this code reads.
+TABLES = {"sensors": ("hash", "name", "zones", "n_bins", "bin_width_ps", "config"),
+          "captures": ("id",) + INSERT_COLUMNS}
 _REQUIRED = ("object", "size", "position", "lights", "repeat", "source")
 _OPTIONAL = {"class_group": None, "x": None, "y": None, "zones": None, "seed": None, "variant": "", "capture_id": "",
              "scene": None, "backend": None, "fidelity": None}

@@ -48,7 +48,7 @@ import pandas as pd
 from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError
 from nlosplan.files import WriteFailed, check_output_file
-from nlosplan.schema import regular_file
+from nlosplan.schema import regular_file, shown
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.data.dataset import LABEL_COLUMNS, Dataset
 from nlosplan.data.records import (
@@ -251,6 +251,12 @@ class CaptureStore:
             if missing:
                 raise UserError(f"capture store {self.path} is damaged: it has no {' and no '.join(missing)} "
                                 f"table{'s' if len(missing) > 1 else ''}")
+            for table, want in TABLES.items():
+                have = {r[1] for r in db.execute(f"PRAGMA table_info({table})")}
+                gone = [c for c in want if c not in have]
+                if gone:
+                    raise UserError(f"capture store {self.path} is damaged: its {table} table has no "
+                                    f"{', '.join(gone)} column{'s' if len(gone) > 1 else ''}")
         if self.readonly:
             return
         if db.execute("PRAGMA journal_mode=WAL").fetchone()[0].lower() != "wal":
@@ -484,6 +490,14 @@ class CaptureStore:
         """
         sql, vals = where_sql(where)
         df = pd.read_sql_query(f"SELECT {self._LABELS} FROM captures c{sql} ORDER BY c.id", self._conn(), params=vals)
+        for col in ("x", "y", "position", "repeat"):   # numbers, or a damaged store said in one line
+            if df[col].dtype != object:
+                continue
+            bad = df[col].map(lambda v: isinstance(v, (str, bytes)) or (col in ("position", "repeat") and v is None))
+            if bad.any():
+                row = df[bad].iloc[0]
+                raise UserError(f"{self._what(row['id'])} is damaged: its {col} label {shown(row[col])} is not a "
+                                "number")
         df["x"], df["y"] = df["x"].astype(float), df["y"].astype(float)
         df["seed"] = df["seed"].astype("Int64")
         return df

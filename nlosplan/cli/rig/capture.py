@@ -66,6 +66,8 @@ def _limits(text: str):
         (x0, x1), (y0, y1) = [tuple(parse_number(v) for v in axis.split(":")) for axis in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: use XMIN:XMAX,YMIN:YMAX in mm, e.g. 0:320,0:320") from None
+    if not all(math.isfinite(v) for v in (x0, x1, y0, y1)):
+        raise argparse.ArgumentTypeError(f"{text[:60]!r}: each value must be a finite number of mm")
     if not (x0 < x1 and y0 < y1):
         raise argparse.ArgumentTypeError(f"{text!r}: each minimum must be below its maximum")
     return (x0, x1), (y0, y1)

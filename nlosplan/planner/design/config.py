@@ -96,9 +96,9 @@ def _schema() -> dict:
                   "pulse_fwhm_ps": pair_of(quantity("pulse_fwhm_ps")), "photon_fraction": pair_of(number_in(0, 1)),
                   "axes": list_of(STRING, min_len=1)},
         "requirement": {"task": one_of("loc", "shape", "size"), "threshold": NUMBER, "condition": STRING},
-        "cost": {k: number_in(0) for k in CostModel().to_dict()},
-        "search": {"grid_points": count, "refine_steps": int_in(0), "seeds": int_in(1, 20), "candidates": count,
-                   "optimize_evals": count, "fidelity": table_of()},
+        "cost": {k: number_in(0, 1000) for k in CostModel().to_dict()},   # relative weights (defaults 0.1-0.3)
+        "search": {"grid_points": int_in(1, 100), "refine_steps": int_in(0, 20), "seeds": int_in(1, 20),
+                   "candidates": int_in(1, 100), "optimize_evals": int_in(1, 10_000), "fidelity": table_of()},
         "bound": {"draws": count, "looks": count, "crlb_repeats": count},
         "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
                     "bootstrap": int_in(0)},
