@@ -104,7 +104,7 @@ FLAG_QUANTITIES = {
 #: Flags that name a file or folder: an empty value is refused when parsed (it would silently mean the current
 #: folder, or nothing). So is an empty ``--out DIR`` (a folder; ``calibrate --out ''`` means no file).
 PATH_FLAGS = ("--store", "--sensor", "--config", "--plan", "--rig-file", "--positions-json", "--real",
-              "--planner", "--pause-file", "--capture-sensor")
+              "--pause-file", "--capture-sensor")
 
 
 def _numbers(value):
@@ -225,6 +225,14 @@ class Parser(argparse.ArgumentParser):
                     raise argparse.ArgumentError(action, f"{arg_string if len(arg_string) <= 40 else f'{v:g}'} is "
                                                          f"out of range; allowed: {q.allowed()}")
         return value
+
+    def format_help(self) -> str:
+        """The help, where each flag of :data:`FLAG_QUANTITIES` says its range (``[allowed: 1 to 1e+06 ps]``)."""
+        for action in self._actions:
+            names = [o for o in action.option_strings if o in FLAG_QUANTITIES]
+            if names and action.help and "[allowed:" not in action.help:
+                action.help += f" [allowed: {QUANTITIES[FLAG_QUANTITIES[names[0]]].allowed()}]"
+        return super().format_help()
 
     def error(self, message: str):  # noqa: D401 - argparse API
         raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")

@@ -480,8 +480,8 @@ frame plus the controller's raw position, sensor and firmware configuration,
 timestamps, lights, repeat). The plan is checked dry first (limits, object
 never in the LiDAR's direct view) and the gantry's own limits at open (GRBL's
 machine space and work offset); nothing moves if a check fails. The sensor is
-stopped and the gantry parked at the end, also on errors and Ctrl-C, and the
-last line says so. Rerunning the same command resumes the run: stored captures
+stopped and the gantry parked at the end, also on errors, Ctrl-C (exit 130)
+and SIGTERM (exit 143), and the last line says so. Rerunning the same command resumes the run: stored captures
 are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
 --home). --emulate runs both devices as pty emulators (DENALI scene, fast
