@@ -536,3 +536,17 @@ def test_atomic_write_on_a_full_disk_leaves_the_old_file_and_no_temporary(full_d
     with pytest.raises(WriteFailed, match="a.npy"):
         save_npy(disk / "a.npy", np.zeros(100_000))
     assert sorted(p.name for p in disk.iterdir()) == ["report.md"]  # no 0-byte, truncated or temporary file
+
+
+def test_every_physical_range_is_documented_with_its_flags():
+    """docs/reliability.md's table states each range of nlosplan.schema.QUANTITIES and the flags held to it."""
+    from nlosplan.cli.common import FLAG_QUANTITIES
+    from nlosplan.schema import QUANTITIES
+
+    rows = [line for line in (Path(__file__).resolve().parents[1] / "docs" / "reliability.md").read_text().splitlines()
+            if line.startswith("| ") and " | " in line]
+    for name, q in QUANTITIES.items():
+        row = [r for r in rows if name in r.split(" | ")[0] and f"| {q.allowed()} |" in r]
+        assert row, f"{name}: {q.allowed()} is not in docs/reliability.md"
+        flags = [f for f, n in FLAG_QUANTITIES.items() if n == name]
+        assert all(f"`{f}`" in row[0] for f in flags), (name, flags, row[0])
