@@ -34,10 +34,7 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import sqlite3
-from contextlib import contextmanager
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Iterable, Iterator
 from urllib.parse import quote
@@ -51,6 +48,7 @@ from nlosplan.files import WriteFailed, check_output_file
 from nlosplan.schema import regular_file, shown
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.data.dataset import LABEL_COLUMNS, Dataset
+from nlosplan.data.writers import hold
 from nlosplan.data.records import (
     APPLICATION_ID,
     FILTER_COLUMNS,
@@ -84,28 +82,6 @@ _DATA = "CAST(c.data AS BLOB)"
 
 def _locked(exc: sqlite3.Error) -> bool:
     return "locked" in str(exc) or "busy" in str(exc)
-
-
-def _process_start(pid: int) -> str | None:
-    """When process ``pid`` started (clock ticks since boot, from /proc), to tell it from a later one of that id."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
-    except (OSError, IndexError):
-        return None
-
-
-def _alive(pid: int, host: str, start: str | None) -> bool:
-    """Whether the process that wrote a ``writers`` row still runs (on this host; another host's cannot be told)."""
-    if host != socket.gethostname():
-        return False
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass   # another user's process: it runs
-    now = _process_start(int(pid))
-    return start is None or now is None or now == start
 
 
 class CaptureStore:
@@ -323,43 +299,12 @@ class CaptureStore:
         return f"capture {cid}{f' ({str(key)[:120]})' if key else ''} of capture store {self.path}"
 
     # ------------------------------------------------------------ one writer of a kind
-    @contextmanager
-    def writer(self, what: str) -> Iterator[None]:
-        """Hold the store for one writer of ``what`` (e.g. one dataset build) while the block runs.
-
-        A second process asking for the same ``what`` meanwhile gets a one-line UserError at once, before any
-        work, naming the holder (its process id, since when); a holder that has died (kill -9, a crash) or
-        runs on another host does not count. Other writers are not affected (SQLite orders every commit).
-        The holder is a row of the table ``writers``, removed when the block ends.
-        """
-        db = self._conn()
+    def writer(self, what: str):
+        """Hold the store for one writer of ``what`` (e.g. one dataset build) while the block runs (a context
+        manager: :func:`nlosplan.data.writers.hold`): the same ``what`` from another live process is one line."""
         if self.readonly:
             raise UserError(f"capture store {self.path} was opened read-only")
-        me = (os.getpid(), socket.gethostname(), _process_start(os.getpid()))
-        db.execute("BEGIN IMMEDIATE")
-        try:
-            db.execute("CREATE TABLE IF NOT EXISTS writers (what TEXT PRIMARY KEY, pid INTEGER NOT NULL, "
-                       "host TEXT NOT NULL, process_start TEXT, since_utc TEXT NOT NULL)")
-            row = db.execute("SELECT pid, host, process_start, since_utc FROM writers WHERE what = ?",
-                             (what,)).fetchone()
-            if row is not None and row[0] != me[0] and _alive(*row[:3]):
-                raise UserError(f"capture store {self.path}: another {what.split(' #')[0]} (process {row[0]}, since "
-                                f"{row[3][:19]} UTC) is writing the same captures into it; wait for it to end, then "
-                                "rerun: what it stored is skipped")
-            db.execute("INSERT OR REPLACE INTO writers VALUES (?, ?, ?, ?, ?)",
-                       (what, *me, datetime.now(timezone.utc).isoformat(timespec="seconds")))
-            db.execute("COMMIT")
-        except BaseException:
-            if db.in_transaction:
-                db.execute("ROLLBACK")
-            raise
-        try:
-            yield
-        finally:
-            try:
-                db.execute("DELETE FROM writers WHERE what = ? AND pid = ?", (what, me[0]))
-            except sqlite3.Error:
-                pass   # a full disk or a lock at the very end: the next writer finds this process gone
+        return hold(self._conn(), self.path, what)
 
     # ------------------------------------------------------------ writing
     _INSERT = (f"INSERT INTO captures ({', '.join(INSERT_COLUMNS)}) VALUES ({', '.join('?' * len(INSERT_COLUMNS))}) "
