@@ -159,19 +159,15 @@ def test_sigterm_ends_rig_capture_with_143_and_one_line(tmp_path):
     assert "finalize: sensor stopped; gantry parked at (0, 0) mm; rerun the same command to resume" in last
 
 
-def _ctrl_c_on() -> None:
-    """In the child: Ctrl-C as at a terminal (a runner in the background may have it ignored)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def test_an_interrupt_while_python_shuts_down_exits_130_not_0():
     """Ctrl-C after the work, during the interpreter's exit (an atexit hook here): 130, never 0."""
     code = ("import atexit, os, signal, time\n"
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"   # as at a terminal (a runner may ignore it)
             "from nlosplan.cli import main\n"
             "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(5)))\n"
             "raise SystemExit(main())\n")
     r = subprocess.run([sys.executable, "-c", code, "sensor", "list"], env=ENV, capture_output=True, text=True,
-                       timeout=120, preexec_fn=_ctrl_c_on)
+                       timeout=120)
     assert r.returncode == 130, r.stderr
     assert "tmf8828-3x3-short" in r.stdout   # the output was written first
     assert "Traceback" not in r.stderr
