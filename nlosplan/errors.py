@@ -16,8 +16,8 @@ def check_keys(given, allowed, what: str, *, prefix: str = "", suffix: str = "")
     """Raise :class:`UserError` when ``given`` (keys of a mapping) holds names not in ``allowed``.
 
     The message is ``{prefix}unknown {what} {bad}{suffix}; allowed: {allowed}``:
-    the unknown names sorted, the allowed ones in the order given (sort them
-    first for an alphabetical list).
+    the unknown names sorted (the first 10, each cut to 40 characters), the
+    allowed ones in the order given (sort them first for an alphabetical list).
 
     Parameters
     ----------
@@ -31,4 +31,6 @@ def check_keys(given, allowed, what: str, *, prefix: str = "", suffix: str = "")
     """
     bad = sorted(set(given) - set(allowed))
     if bad:
-        raise UserError(f"{prefix}unknown {what} {', '.join(bad)}{suffix}; allowed: {', '.join(allowed)}")
+        names = [str(b) if len(str(b)) <= 40 else str(b)[:40] + "..." for b in bad[:10]]   # never a huge line
+        more = f" and {len(bad) - 10} more" if len(bad) > 10 else ""
+        raise UserError(f"{prefix}unknown {what} {', '.join(names)}{more}{suffix}; allowed: {', '.join(allowed)}")

@@ -27,7 +27,8 @@ from typing import Iterator
 
 from nlosplan.errors import UserError
 
-__all__ = ["PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file", "check_plot_path",
+__all__ = ["PLOT_BYTES", "PLOT_SUFFIXES", "WriteFailed", "atomic_path", "check_output_dir", "check_output_file",
+           "check_plot_path",
            "check_free_space", "write_bytes", "write_json", "write_text", "save_npy", "writing"]
 
 #: Plot file types matplotlib writes without extra packages (the suffix picks the format).
@@ -192,31 +193,61 @@ def _check_parents(path: Path, flag: str) -> Path:
     return anc
 
 
+def _checked_name(path, flag: str, what: str) -> Path:
+    """``path`` as a Path; UserError when it is empty or has a name no file system takes (over 255 bytes)."""
+    text = str(path)
+    if text == "" or (text == "." and what != "folder"):   # "." is the current folder: a folder, not a file
+        raise UserError(f"{flag}: give a {what}")
+    long = [part for part in Path(text).parts if len(os.fsencode(part)) > 255]
+    if long or len(os.fsencode(text)) > 4095:
+        raise UserError(f"{flag} {text[:60]}...: a name in the path is longer than 255 bytes (or the path than 4095); "
+                        "choose a shorter one")
+    return Path(text)
+
+
+def _checking(flag: str, path):
+    """Turn an OSError of a check (no permission to look into a folder, ...) into one line naming the flag."""
+    @contextmanager
+    def guard():
+        try:
+            yield
+        except OSError as exc:
+            raise UserError(f"{flag} {path}: {exc.strerror or exc}") from None
+
+    return guard()
+
+
 def check_output_file(path, flag: str = "--out", *, suffixes: tuple[str, ...] | None = None) -> Path:
     """Check, before any work, that a file can be written at ``path``.
 
     Raises
     ------
     UserError
-        ``path`` is a folder, lies inside a file, its folder cannot be
-        written, or (with ``suffixes``) its suffix is not one of them.
+        ``path`` is empty, too long, a folder, lies inside a file, its folder
+        cannot be written, or (with ``suffixes``) its suffix is not one of them.
     """
-    path = Path(path)
-    if str(path) in ("", "."):
-        raise UserError(f"{flag}: give a file path")
+    path = _checked_name(path, flag, "file path")
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise UserError(f"{flag} {path}: unknown file type {path.suffix or '(none)'!r}; allowed: {', '.join(suffixes)}")
-    if path.is_dir():
-        raise UserError(f"{flag} {path} is a folder; give a file path")
-    _check_parents(path, flag)
-    if path.exists() and not os.access(path, os.W_OK):
-        raise UserError(f"{flag} {path}: the file is read-only")
+    with _checking(flag, path):
+        if path.is_dir():
+            raise UserError(f"{flag} {path} is a folder; give a file path")
+        _check_parents(path, flag)
+        if path.exists() and not os.access(path, os.W_OK):
+            raise UserError(f"{flag} {path}: the file is read-only")
     return path
 
 
+#: Free space a figure needs (the largest figures nlosplan writes, e.g. the design report's, are ~0.18 MB).
+PLOT_BYTES = 2**20
+
+
 def check_plot_path(path, flag: str = "--plot") -> Path:
-    """:func:`check_output_file` for a figure: the suffix must be a format matplotlib writes."""
-    return check_output_file(path, flag, suffixes=PLOT_SUFFIXES)
+    """:func:`check_output_file` for a figure: the suffix must be a format matplotlib writes, and its disk must
+    have :data:`PLOT_BYTES` free (a full disk is found before the work, not when the figure is saved)."""
+    path = check_output_file(path, flag, suffixes=PLOT_SUFFIXES)
+    check_free_space(path, PLOT_BYTES, flag)
+    return path
 
 
 def check_output_dir(path, flag: str = "--out") -> Path:
@@ -225,15 +256,17 @@ def check_output_dir(path, flag: str = "--out") -> Path:
     Raises
     ------
     UserError
-        ``path`` is an existing file, lies inside a file, or cannot be written.
+        ``path`` is empty (it would be the current folder), too long, an
+        existing file, lies inside a file, or cannot be written.
     """
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise UserError(f"{flag} {path} is a file; give a folder (files with fixed names are written inside it)")
-    if path.is_dir():
-        _probe_writable(path, flag, path)
-    else:
-        _check_parents(path, flag)
+    path = _checked_name(path, flag, "folder")
+    with _checking(flag, path):
+        if path.exists() and not path.is_dir():
+            raise UserError(f"{flag} {path} is a file; give a folder (files with fixed names are written inside it)")
+        if path.is_dir():
+            _probe_writable(path, flag, path)
+        else:
+            _check_parents(path, flag)
     return path
 
 
@@ -242,7 +275,10 @@ def check_free_space(path, needed_bytes: float, flag: str = "--out") -> None:
     import shutil
 
     anc = _first_existing(Path(path))
-    free = shutil.disk_usage(anc if anc.is_dir() else anc.parent).free
+    try:
+        free = shutil.disk_usage(anc if anc.is_dir() else anc.parent).free
+    except OSError:   # a file system that cannot say: the write itself will tell
+        return
     if needed_bytes > free:
         raise UserError(f"{flag} {path}: the output needs about {_size(needed_bytes)} but only {_size(free)} is free "
                         f"on that disk; free some space or choose another place")

@@ -1,16 +1,17 @@
-"""Issue 18: every bad input a user can type exits 2 with exactly one line on stderr, before any work, and
-changes nothing committed.
+"""Issues 18 and 39: every bad input a user can type exits 2 with exactly one line on stderr, before any work,
+and changes nothing committed.
 
 Each case runs through the real command line (``nlosplan.cli.main`` in this process) and asserts exit code 2,
 exactly one line on stderr (``nlosplan: error: ...``, with the words that say what is wrong), no traceback, and
 that the stores, logs and outputs it names are byte for byte unchanged (SHA-1 before and after) and that no
 product file was left behind. The cases that need the machine (a read-only medium, a full disk: root and a
-tmpfs) skip with the reason elsewhere. Interruptions (kill -9, then resume) are in test_interruptions.py.
+tmpfs) skip with the reason elsewhere. The files are built by ``bad_input_files.make_files``. Interruptions
+(kill -9, then resume) are in test_interruptions.py; signals, locked stores and standard output in
+test_signals_and_locks.py; issue 39's own sweep of 100 further cases in test_bad_inputs_sweep.py.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -22,72 +23,17 @@ import pytest
 
 from nlosplan.cli import main
 from nlosplan.data.store import CaptureStore
-from nlosplan.sensor_models import preset
+
+from bad_input_files import DESIGN_TOMLS, check_one_line, digest, fill, make_files, mount
 
 BIG = str(10**30)
 
 
 # ----------------------------------------------------------------------------- fixtures
-def _digest(path: Path) -> str:
-    if not path.exists():
-        return "absent"
-    if path.is_dir():
-        h = hashlib.sha1()
-        for p in sorted(path.rglob("*")):
-            if p.is_file():
-                h.update(str(p.relative_to(path)).encode() + p.read_bytes())
-        return h.hexdigest()
-    return hashlib.sha1(path.read_bytes()).hexdigest()
-
-
-def _mount(*args: str) -> bool:
-    return subprocess.run(["mount", *args], capture_output=True).returncode == 0
-
-
 @pytest.fixture(scope="module")
 def fx(tmp_path_factory):
     """Files of every kind a user may point a command at (built once; cases must not change them)."""
-    d = tmp_path_factory.mktemp("bad")
-    blob = bytes(np.random.default_rng(1).integers(0, 256, 2000, dtype=np.uint8))
-    for name in ("bin.toml", "bin.json", "bin.sqlite"):
-        (d / name).write_bytes(blob)
-    (d / "empty.toml").write_text("")
-    (d / "empty.json").write_text("")
-    (d / "partial.toml").write_text("n_bins = 64\n")
-    (d / "partial.json").write_text('{"n_bins": 64}')
-    (d / "typo.toml").write_text('base = "tmf8828-3x3-short"\njiter_fwhm_ps = 3.0\n')
-    (d / "wrongtype.toml").write_text('base = "tmf8828-3x3-short"\nn_bins = "many"\n')
-    (d / "list.json").write_text("[1, 2, 3]")
-    (d / "afile").write_text("x")
-    (d / "adir").mkdir()
-    (d / "dir.toml").mkdir()
-    # a small store of synthetic captures (no simulation: fast)
-    sensor = preset("tmf8828-3x3-short")
-    rng = np.random.default_rng(0)
-    with CaptureStore(d / "store.sqlite") as st:
-        st.put_many([(rng.poisson(40, (3, 3, 128)), dict(object=o, size="8in", position=p, lights="off", repeat=r,
-                                                       source="sim:fast", x=0.01 * p, y=0.3))
-                     for o in ("A", "S") for p in range(4) for r in range(2)], sensor=sensor)
-    # DENALI folders with counts a TMF8828 cannot give
-    base = rng.poisson(50, (2, 3, 3, 128))
-    for name, arr in (("den_ok", base), ("den_big", np.full(base.shape, 1e30)), ("den_neg", -base),
-                      ("den_frac", base + 0.5), ("den_over", np.full(base.shape, 2**25)),
-                      ("den_nan", np.where(base > 60, np.nan, base.astype(float)))):
-        f = d / name / "A_8inch_3x3_lightoff_NLOSdata" / "spad_histogram"
-        f.mkdir(parents=True)
-        for i in range(2):
-            np.save(f / f"{i:03d}.npy", arr)
-    (d / "den_empty" / "README_folder").mkdir(parents=True)
-    # design TOMLs with wrong types (checked when the file is read)
-    tiny = ('[space]\nzones = ["1x1", "3x3"]\nbin_factors = [1, 2]\naxes = ["zones", "jitter_fwhm_ps"]\n'
-            "[search]\ngrid_points = 3\nrefine_steps = 1\nseeds = 1\ncandidates = 1\noptimize_evals = 4\n"
-            "[search.fidelity.bound]\ndraws = 60\n[search.fidelity.trained]\nepochs = 4\nbootstrap = 50\n"
-            '[scenes]\nobjects = ["A", "S", "circle"]\npositions_stride = 10\nrepeats = 1\ncrlb_objects = ["A"]\n'
-            'crlb_stride = 5\nfidelity = "draft"\n')
-    (d / "tiny.toml").write_text(tiny)
-    for key, (old, new) in DESIGN_TOMLS.items():
-        assert old in tiny, key
-        (d / f"d_{key}.toml").write_text(tiny.replace(old, new, 1))
+    d = make_files(tmp_path_factory.mktemp("bad"))
     yield d
     for p in d.rglob("*"):  # chmod'ed fixtures must stay removable
         if p.is_dir():
@@ -101,7 +47,7 @@ def readonly(fx, tmp_path_factory):
     shutil.copy(fx / "store.sqlite", src / "store.sqlite")
     if os.geteuid() == 0:
         ro = tmp_path_factory.mktemp("ro")
-        if not (_mount("--bind", str(src), str(ro)) and _mount("-o", "remount,ro,bind", str(ro))):
+        if not (mount("--bind", str(src), str(ro)) and mount("-o", "remount,ro,bind", str(ro))):
             subprocess.run(["umount", str(ro)], capture_output=True)
             pytest.skip("read-only medium: running as root, but this container may not mount (no CAP_SYS_ADMIN); "
                         "chmod does not stop root")
@@ -124,7 +70,7 @@ def full_disk(tmp_path):
             pytest.skip("a full disk needs a small tmpfs, which only root can mount")
         mnt = tmp_path / f"full{len(mounted)}"
         mnt.mkdir()
-        if not _mount("-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)):
+        if not mount("-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)):
             pytest.skip("cannot mount a tmpfs here (no CAP_SYS_ADMIN in this container)")
         mounted.append(mnt)
         return mnt
@@ -135,23 +81,6 @@ def full_disk(tmp_path):
 
 
 # ----------------------------------------------------------------------------- the cases
-#: Design TOMLs: (text replaced, replacement) in the tiny configuration.
-DESIGN_TOMLS = {
-    "stride0": ("positions_stride = 10", "positions_stride = 0"),
-    "stride_two": ("positions_stride = 10", 'positions_stride = "two"'),
-    "seeds_three": ("seeds = 1", 'seeds = "three"'),
-    "bound_high": ("[search.fidelity.bound]\ndraws = 60", '[search.fidelity]\nbound = "high"'),
-    "cost_cheap": ("[search]", '[cost]\nzones = "cheap"\n[search]'),
-    "threshold_abc": ("[search]", '[[requirements]]\ntask = "loc"\nthreshold = "abc"\n[search]'),
-    "jitter_lots": ("[space]\n", '[space]\njitter_fwhm_ps = "lots"\n'),
-    "zones_int": ('zones = ["1x1", "3x3"]', "zones = 3"),
-    "grid_neg": ("grid_points = 3", "grid_points = -2"),
-    "repeats_float": ("repeats = 1", "repeats = 1.5"),
-    "objects_bad": ('objects = ["A", "S", "circle"]', 'objects = ["nope"]'),
-    "epochs_str": ("epochs = 4", 'epochs = "four"'),
-    "lights_dim": ('fidelity = "draft"', 'fidelity = "draft"\nlights = "dim"'),
-}
-
 SIM = ["simulate", "--fidelity", "draft"]
 DESIGN = ["design", "--quick", "--workers", "1"]
 BUILD = ["dataset", "build", "--objects", "A", "--sizes", "8in", "--positions", "0-1", "--repeats", "1",
@@ -159,6 +88,7 @@ BUILD = ["dataset", "build", "--objects", "A", "--sizes", "8in", "--positions", 
 BENCH = ["benchmark", "--models", "mlp", "--tasks", "size", "--small"]
 OBS = ["evaluate", "observer", "shape", "--objects", "A,S", "--positions", "0-1", "--fidelity", "draft"]
 CRLB = ["evaluate", "crlb", "--objects", "A", "--positions", "0-1", "--fidelity", "draft"]
+RIG = ["rig", "capture", "--emulate", "--positions", "0", "--repeats", "1"]
 
 # (id, argv with {F} for the fixture folder, words the error line must hold, paths that must not change,
 #  paths that must not exist afterwards)
@@ -199,7 +129,8 @@ CASES = [
     ("sim-position", SIM + ["--position", "100"], "position", (), ()),
     ("sim-object", SIM + ["--object", "nope"], "nope", (), ()),
     ("sim-only-zones", SIM + ["--only-zones", "x"], "--only-zones 'x' must be ROW,COL pairs", (), ()),
-    ("sim-wall-samples", ["simulate", "--scene", "wall", "--samples", "0"], "--samples 0 must be >= 1", (), ()),
+    ("sim-wall-samples", ["simulate", "--scene", "wall", "--samples", "0"],
+     "argument --samples: 0 is out of range; allowed: 1 to 256", (), ()),
     ("sim-wall-other-flag", ["simulate", "--scene", "wall", "--position", "3"], "applies only to --scene denali",
      (), ()),
     ("sim-mitsuba-explain", ["simulate", "--backend", "mitsuba", "--explain"], "--explain applies to the fast", (), ()),
@@ -263,7 +194,7 @@ CASES = [
     ("import-store-inside-file", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/afile/i.sqlite"],
      "afile is a file", ("{F}/afile",), ()),
     ("import-positions-binary", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i8.sqlite",
-                                 "--positions-json", "{F}/bin.json"], "not a tag1_positions.json", (),
+                                 "--positions-json", "{F}/bin.json"], "bin.json is a binary file, not text", (),
      ("{F}/i8.sqlite",)),
     ("import-sensor-empty", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i9.sqlite", "--sensor",
                              "{F}/empty.toml"], "the file is empty", (), ("{F}/i9.sqlite",)),
@@ -330,15 +261,18 @@ CASES = [
                       ("stride_two", '[scenes]: positions_stride = "two" must be an integer'),
                       ("seeds_three", '[search]: seeds = "three" must be an integer from 1 to 20'),
                       ("bound_high", "[search.fidelity] bound = 'high' must be a table of knobs"),
-                      ("cost_cheap", '[cost]: zones = "cheap" must be a number >= 0'),
+                      ("cost_cheap", '[cost]: zones = "cheap" must be a number from 0 to 1000'),
                       ("threshold_abc", '[[requirements]] #1: threshold = "abc" must be a number'),
                       ("jitter_lots", '[space]: jitter_fwhm_ps = "lots" must be [low, high]'),
                       ("zones_int", "[space]: zones = 3 must be a non-empty list"),
-                      ("grid_neg", "[search]: grid_points = -2 must be an integer >= 1"),
+                      ("grid_neg", "[search]: grid_points = -2 must be an integer from 1 to 100"),
                       ("repeats_float", "[scenes]: repeats = 1.5 must be an integer >= 1"),
                       ("objects_bad", '[scenes]: objects = ["nope"] must be a non-empty list'),
                       ("epochs_str", '[search.fidelity.trained]: epochs = "four" must be an integer'),
-                      ("lights_dim", "[scenes]: lights = \"dim\" must be one of 'off', 'on'"))],
+                      ("lights_dim", "[scenes]: lights = \"dim\" must be one of 'off', 'on'"),
+                      ("jitter_huge", "[space]: jitter_fwhm_ps = [0, 1e+308] must be [low, high] with low <= high, "
+                                      "each a number from 0 to 1e+07 ps"),
+                      ("deep", "d_deep.toml: space.axes is nested deeper than 32 levels"))],
     ("design-where-no-real", DESIGN + ["--config", "{F}/tiny.toml", "--where", "lights=off", "--out", "{F}/d1"],
      "--where applies only with --real STORE", (), ("{F}/d1",)),
     ("design-capture-sensor-no-real", DESIGN + ["--capture-sensor", "tmf8828-3x3-short", "--out", "{F}/d1"],
@@ -364,26 +298,83 @@ CASES = [
     ("design-out-file", DESIGN + ["--out", "{F}/afile"], "--out {F}/afile is a file", ("{F}/afile",), ()),
     ("design-out-inside-file", DESIGN + ["--out", "{F}/afile/d"], "afile is a file, not a folder", ("{F}/afile",), ()),
     ("design-requirement", DESIGN + ["--requirement", "speed<=3"], "must look like loc<=0.05", (), ()),
+    # ---- issue 39: numbers (strict ASCII, physical ranges), files (depth, duplicates, FIFOs), damaged stores
+    ("sim-binwidth-tiny", SIM + ["--bin-width-ps", "1e-300"],
+     "argument --bin-width-ps: 1e-300 is out of range; allowed: 1 to 1e+06 ps", (), ()),
+    ("sim-binwidth-huge", SIM + ["--bin-width-ps", "1e308"], "argument --bin-width-ps: 1e308 is out of range", (), ()),
+    ("sim-jitter-huge", SIM + ["--jitter-ps", "1e308"],
+     "argument --jitter-ps: 1e308 is out of range; allowed: 0 to 1e+07 ps", (), ()),
+    ("sim-zones-arabic", SIM + ["--zones", "\u0663x\u0663"], "argument --zones: '\u0663x\u0663' must look like 3x3",
+     (), ()),
+    ("sim-repeats-underscore", SIM + ["--repeats", "1_0"],
+     "argument --repeats: '1_0' is not an integer (ASCII digits only)", (), ()),
+    ("sim-sensor-binwidth-huge", SIM + ["--sensor", "{F}/bw_huge.toml"],
+     "bw_huge.toml: bin_width_ps=1e+308 is out of range; allowed: 1 to 1e+06 ps", (), ()),
+    ("sensor-show-binwidth-huge", ["sensor", "show", "{F}/bw_huge.toml"], "bin_width_ps=1e+308 is out of range", (),
+     ()),
+    ("sensor-show-dup-key", ["sensor", "show", "{F}/dup.json"],
+     "dup.json: the key 'n_bins' is given twice in one object", (), ()),
+    ("sensor-show-deep-json", ["sensor", "show", "{F}/deep.json"],
+     "sensor file {F}/deep.json: base is nested deeper than 32 levels", (), ()),
+    ("sensor-show-deep-toml", ["sensor", "show", "{F}/deep.toml"],
+     "sensor file {F}/deep.toml: base is nested deeper than 32 levels", (), ()),
+    ("sensor-show-fifo", ["sensor", "show", "{F}/fifo.toml"], "fifo.toml is a FIFO (named pipe), not a regular file",
+     (), ()),
+    ("dry-run-plan-deep", ["rig", "dry-run", "--plan", "{F}/deep_plan.json"],
+     "positions file {F}/deep_plan.json: the top level is nested deeper than 32 levels", (), ()),
+    ("capture-rig-file-deep", ["rig", "capture", "--emulate", "--gantry-kind", "telemetrix", "--rig-file",
+                               "{F}/deep_rig.toml", "--store", "{F}/r0.db"],
+     "rig file {F}/deep_rig.toml: telemetrix.origin_mm is nested deeper than 32 levels", (), ("{F}/r0.db",)),
+    ("dry-run-limits-huge", ["rig", "dry-run", "--limits", "0:1e308,0:320"],
+     "argument --limits: 0:1e308,0:320 is out of range; allowed: -10000 to 10000 mm", (), ()),
+    ("capture-run-empty", RIG + ["--run", "", "--store", "{F}/r1.db"], "argument --run: '': a run id is 1 to 200", (),
+     ("{F}/r1.db",)),
+    ("capture-faults-nan", RIG + ["--emulate-faults", "drop=nan", "--store", "{F}/r1.db"],
+     "argument --emulate-faults: fault drop=nan is out of range", (), ("{F}/r1.db",)),
+    ("capture-settle-huge", RIG + ["--settle", "1e308", "--store", "{F}/r1.db"],
+     "argument --settle: 1e308 is out of range; allowed: 0 to 3600 s", (), ("{F}/r1.db",)),
+    ("capture-feed-tiny", RIG + ["--feed", "1e-300", "--store", "{F}/r1.db"],
+     "argument --feed: 1e-300 is out of range; allowed: 1 to 100000 mm/min", (), ("{F}/r1.db",)),
+    ("capture-work-offset-huge", RIG + ["--work-offset", "1e308,0", "--store", "{F}/r1.db"],
+     "--work-offset X=1e+308 is out of range; allowed: -10000 to 10000 mm", (), ("{F}/r1.db",)),
+    ("capture-time-scale-huge", RIG + ["--time-scale", "1e308", "--store", "{F}/r1.db"],
+     "argument --time-scale: 1e308 is out of range; allowed: 0.1 to 10000", (), ("{F}/r1.db",)),
+    ("run-run-empty", ["rig", "run", "--emulate", "--run", "", "--store", "{F}/r1.db", "--out", "{F}/rr"],
+     "argument --run: '': a run id is 1 to 200", (), ("{F}/r1.db", "{F}/rr")),
+    ("import-positions-nan", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i10.sqlite",
+                              "--positions-json", "{F}/pos_nan.json"],
+     "positions file {F}/pos_nan.json: frame0_tag1 x=nan must be finite", (), ("{F}/i10.sqlite",)),
+    ("import-positions-huge", ["dataset", "import-denali", "{F}/den_ok", "--store", "{F}/i10.sqlite",
+                               "--positions-json", "{F}/pos_huge.json"],
+     "frame0_tag1 x=1e+308 is out of range; allowed: -100 to 100 m", (), ("{F}/i10.sqlite",)),
+    ("crlb-photon-huge", CRLB + ["--photon-scale", "1e300"],
+     "argument --photon-scale: 1e300 is out of range; allowed: 0 to 1e+12", (), ()),
+    ("info-fifo", ["dataset", "info", "--store", "{F}/fifo.sqlite"],
+     "capture store {F}/fifo.sqlite is a FIFO (named pipe), not a regular file", (), ()),
+    ("status-fifo", ["rig", "status", "--store", "{F}/fifo.sqlite"], "fifo.sqlite is a FIFO (named pipe)", (), ()),
+    ("build-fifo", BUILD + ["--store", "{F}/fifo.sqlite"], "fifo.sqlite is a FIFO (named pipe)", (), ()),
+    *[(f"{cmd}-no-sensors", argv + ["--store", "{F}/nosensors.sqlite"],
+       "capture store {F}/nosensors.sqlite is damaged: it has no sensors table", ("{F}/nosensors.sqlite",), ())
+      for cmd, argv in (("info", ["dataset", "info"]), ("status", ["rig", "status"]),
+                        ("export", ["dataset", "export-denali", "--out", "{F}/e3"]))],
+    ("status-blob-size", ["rig", "status", "--store", "{F}/badblob.sqlite"],
+     "is damaged: its histogram holds 100 bytes, 9216 expected for shape [3, 3, 128] of <i8", ("{F}/badblob.sqlite",),
+     ()),
+    ("export-blob-size", ["dataset", "export-denali", "--store", "{F}/badblob.sqlite", "--out", "{F}/e4"],
+     "capture 3 (A|8in|1|off|3x3|0|sim:fast|", ("{F}/badblob.sqlite",), ("{F}/e4",)),
+    ("export-blob-dtype", ["dataset", "export-denali", "--store", "{F}/baddtype.sqlite", "--out", "{F}/e5"],
+     "its histogram dtype '<f8' is not one of <i8, <f4", ("{F}/baddtype.sqlite",), ("{F}/e5",)),
+    ("export-negative-count", ["dataset", "export-denali", "--store", "{F}/negcount.sqlite", "--out", "{F}/e6"],
+     "a count of -9187201950435737472 is negative", ("{F}/negcount.sqlite",), ("{F}/e6",)),
+    ("export-corrupt-page", ["dataset", "export-denali", "--store", "{F}/corrupt.sqlite", "--out", "{F}/e7"],
+     "capture store {F}/corrupt.sqlite is damaged (SQLite's quick check:", ("{F}/corrupt.sqlite",), ("{F}/e7",)),
+    ("serve-corrupt-page", ["serve", "{F}/corrupt.sqlite", "--port", "0"], "is damaged (SQLite's quick check:",
+     ("{F}/corrupt.sqlite",), ()),
     # ---- the command itself
     ("no-command", [], "give a command: design, sensor, simulate", (), ()),
     ("bad-command", ["bogus-command"], "invalid choice: 'bogus-command'", (), ()),
     ("bad-flag", ["--bogus"], "unrecognized arguments: --bogus", (), ()),
 ]
-
-
-def _fill(value, folder: Path):
-    return [str(v).replace("{F}", str(folder)) for v in value] if isinstance(value, (list, tuple)) else \
-        str(value).replace("{F}", str(folder))
-
-
-def _check_one_line(code: int, err: str, words: str) -> str:
-    lines = err.strip().splitlines()
-    assert code == 2, err
-    assert "Traceback" not in err, err
-    assert len(lines) == 1, err
-    assert lines[0].startswith("nlosplan: error: "), lines[0]
-    assert words in lines[0], lines[0]
-    return lines[0]
 
 
 def test_the_suite_is_large_enough():
@@ -392,20 +383,20 @@ def test_the_suite_is_large_enough():
 
 @pytest.mark.parametrize("name, argv, words, unchanged, absent", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_exits_2_with_one_line_and_changes_nothing(fx, capsys, name, argv, words, unchanged, absent):
-    watched = {p: _digest(Path(p)) for p in _fill(unchanged, fx)}
-    code = main(_fill(argv, fx))
+    watched = {p: digest(Path(p)) for p in fill(unchanged, fx)}
+    code = main(fill(argv, fx))
     _, err = capsys.readouterr()
-    _check_one_line(code, err, _fill(words, fx))
+    check_one_line(code, err, fill(words, fx))
     for p, d in watched.items():
-        assert _digest(Path(p)) == d, f"{p} changed"
-    for p in _fill(absent, fx):
+        assert digest(Path(p)) == d, f"{p} changed"
+    for p in fill(absent, fx):
         assert not Path(p).exists(), f"{p} was left behind"
 
 
 # ----------------------------------------------------------------------------- cases that need a fixture each
 def test_npy_out_that_is_a_folder(fx, capsys):
     (fx / "adir.npy").mkdir(exist_ok=True)
-    _check_one_line(main(SIM + ["--out", str(fx / "adir.npy")]), capsys.readouterr().err,
+    check_one_line(main(SIM + ["--out", str(fx / "adir.npy")]), capsys.readouterr().err,
                     f"--out {fx / 'adir.npy'} is a folder; give a file path")
 
 
@@ -432,28 +423,28 @@ def test_resume_on_a_damaged_log_names_the_lines_and_changes_nothing(fx, tmp_pat
     lines = log.read_text().splitlines()
     lines[1], lines[3] = lines[1][:20], "garbage"
     log.write_text("\n".join(lines) + "\n")
-    before = _digest(tmp_path / "d")
+    before = digest(tmp_path / "d")
     code = main(DESIGN + ["--config", str(fx / "tiny.toml"), "--resume", "--out", str(tmp_path / "d")])
-    line = _check_one_line(code, capsys.readouterr().err, "line(s) 2, 4 of 6 are damaged")
+    line = check_one_line(code, capsys.readouterr().err, "line(s) 2, 4 of 6 are damaged")
     assert "--repair" in line
-    assert _digest(tmp_path / "d") == before
+    assert digest(tmp_path / "d") == before
 
 
 def test_a_rerun_over_a_previous_run_is_refused_without_overwrite(fx, tmp_path, capsys):
     _design_run(tmp_path / "d", fx / "tiny.toml")
-    before = _digest(tmp_path / "d")
+    before = digest(tmp_path / "d")
     code = main(DESIGN + ["--config", str(fx / "tiny.toml"), "--out", str(tmp_path / "d")])
-    line = _check_one_line(code, capsys.readouterr().err, "holds a previous run (6 evaluations)")
+    line = check_one_line(code, capsys.readouterr().err, "holds a previous run (6 evaluations)")
     assert "--resume" in line and "--overwrite" in line
-    assert _digest(tmp_path / "d") == before
+    assert digest(tmp_path / "d") == before
 
 
 def test_resume_with_another_configuration_changes_nothing(fx, tmp_path, capsys):
     _design_run(tmp_path / "d", fx / "tiny.toml")
-    before = _digest(tmp_path / "d")
+    before = digest(tmp_path / "d")
     code = main(DESIGN + ["--resume", "--out", str(tmp_path / "d")])  # --quick without the tiny TOML
-    _check_one_line(code, capsys.readouterr().err, "is from a run with another configuration")
-    assert _digest(tmp_path / "d") == before
+    check_one_line(code, capsys.readouterr().err, "is from a run with another configuration")
+    assert digest(tmp_path / "d") == before
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -464,14 +455,16 @@ def test_resume_with_another_configuration_changes_nothing(fx, tmp_path, capsys)
     (["dataset", "export-denali", "--store", "{F}/store.sqlite", "--out", "{RO}/e"], "cannot write in {RO}"),
     (DESIGN + ["--out", "{RO}/d"], "cannot write in {RO}"),
     (BENCH + ["--store", "{F}/store.sqlite", "--out", "{RO}/b"], "cannot write in {RO}"),
+    (["rig", "run", "--emulate", "--budget", "2", "--store", "{F}/rr.sqlite", "--out", "{RO}/x"],
+     "cannot write in {RO}"),
 ])
 def test_a_read_only_target_is_refused_before_any_work(fx, readonly, capsys, argv, words):
     if os.geteuid() != 0:
         words = words.replace(" (Read-only file system)", "")
-    before = _digest(readonly)
-    argv = [a.replace("{RO}", str(readonly)) for a in _fill(argv, fx)]
-    _check_one_line(main(argv), capsys.readouterr().err, _fill(words, fx).replace("{RO}", str(readonly)))
-    assert _digest(readonly) == before
+    before = digest(readonly)
+    argv = [a.replace("{RO}", str(readonly)) for a in fill(argv, fx)]
+    check_one_line(main(argv), capsys.readouterr().err, fill(words, fx).replace("{RO}", str(readonly)))
+    assert digest(readonly) == before
 
 
 @pytest.mark.parametrize("argv", [
@@ -480,12 +473,12 @@ def test_a_read_only_target_is_refused_before_any_work(fx, readonly, capsys, arg
     ["rig", "status", "--store", "{RO}/store.sqlite", "--json"],
 ])
 def test_a_read_only_store_is_read_and_left_unchanged(fx, readonly, tmp_path, capsys, argv):
-    before = _digest(readonly)
+    before = digest(readonly)
     code = main([a.replace("{RO}", str(readonly)).replace("{OUT}", str(tmp_path)) for a in argv])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert json.loads(out)
-    assert _digest(readonly) == before
+    assert digest(readonly) == before
     if argv[1] == "info":
         assert json.loads(out)["captures"] == 16
 
@@ -502,7 +495,17 @@ def test_full_disk_is_refused_before_simulating(full_disk, capsys):
     disk = full_disk("64k")
     (disk / "fill").write_bytes(b"\0" * 40_000)
     code = main(SIM + ["--repeats", "3", "--out", str(disk / "s")])
-    _check_one_line(code, capsys.readouterr().err, "the output needs about")
+    check_one_line(code, capsys.readouterr().err, "the output needs about")
+    assert not (disk / "s").exists()
+
+
+def test_a_plot_on_a_full_disk_is_refused_before_simulating(full_disk, capsys):
+    """The arrays fit, the figure would not: found when the path is checked, not after the simulation."""
+    disk = full_disk("256k")
+    code = main(SIM + ["--out", str(disk / "s"), "--plot"])
+    line = check_one_line(code, capsys.readouterr().err, f"--plot {disk / 's' / 'histograms.png'}: the output needs "
+                                                         "about 1.0 MB but only")
+    assert "free some space or choose another place" in line
     assert not (disk / "s").exists()
 
 
@@ -514,7 +517,7 @@ def test_full_disk_while_importing_keeps_the_committed_captures(fx, full_disk, t
         np.save(root / f"{i:03d}.npy", np.random.default_rng(i).integers(0, 1 << 20, (3, 3, 3, 128)))
     store = full_disk("400k") / "s.sqlite"
     code = main(["dataset", "import-denali", str(tmp_path / "data"), "--store", str(store)])
-    line = _check_one_line(code, capsys.readouterr().err, "the captures committed before are kept")
+    line = check_one_line(code, capsys.readouterr().err, "the captures committed before are kept")
     assert "rerun the same command" in line
     with CaptureStore(store, readonly=True) as st:
         assert st.integrity_check() == "ok"
@@ -533,3 +536,17 @@ def test_atomic_write_on_a_full_disk_leaves_the_old_file_and_no_temporary(full_d
     with pytest.raises(WriteFailed, match="a.npy"):
         save_npy(disk / "a.npy", np.zeros(100_000))
     assert sorted(p.name for p in disk.iterdir()) == ["report.md"]  # no 0-byte, truncated or temporary file
+
+
+def test_every_physical_range_is_documented_with_its_flags():
+    """docs/reliability.md's table states each range of nlosplan.schema.QUANTITIES and the flags held to it."""
+    from nlosplan.cli.common import FLAG_QUANTITIES
+    from nlosplan.schema import QUANTITIES
+
+    rows = [line for line in (Path(__file__).resolve().parents[1] / "docs" / "reliability.md").read_text().splitlines()
+            if line.startswith("| ") and " | " in line]
+    for name, q in QUANTITIES.items():
+        row = [r for r in rows if name in r.split(" | ")[0] and f"| {q.allowed()} |" in r]
+        assert row, f"{name}: {q.allowed()} is not in docs/reliability.md"
+        flags = [f for f, n in FLAG_QUANTITIES.items() if n == name]
+        assert all(f"`{f}`" in row[0] for f in flags), (name, flags, row[0])

@@ -21,7 +21,7 @@ def run(capsys, *argv):
         (["simulate", "--jitter-ps", "-5"], "argument --jitter-ps: -5 must be >= 0"),
         (["simulate", "--bins", "0"], "argument --bins: 0 is out of range"),
         (["simulate", "--zones", "3by3"], "--zones"),
-        (["simulate", "--distance", "abc"], "invalid float value: 'abc'"),
+        (["simulate", "--distance", "abc"], "argument --distance: 'abc' is not a number"),
         (["simulate", "--scene", "wall", "--albedo", "2"], "albedo"),
         (["sensor", "show", "/nonexistent/sensor.toml"], "sensor file /nonexistent/sensor.toml does not exist"),
         (["bogus-command"], "invalid choice"),

@@ -74,7 +74,7 @@ def test_bad_input_exits_2_with_one_line(real, capsys, argv, message):
 
 def test_missing_file_is_one_line(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "none.json"), "--out", "", "--plot", ""]) == 2
-    assert "cannot read capture file" in capsys.readouterr().err
+    assert f"capture file {tmp_path / 'none.json'} does not exist" in capsys.readouterr().err
 
 
 def test_help_teaches_the_three_inputs(capsys):

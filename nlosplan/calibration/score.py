@@ -16,7 +16,6 @@ stays on the sensor side of the rooms.
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 
@@ -44,10 +43,9 @@ def input_kind(path) -> str:
     if p.suffix == ".toml":
         return "statistics"
     if p.suffix == ".json":
-        try:
-            data = json.loads(p.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise UserError(f"{p} is not valid JSON: {str(exc).splitlines()[0]}") from None
+        from nlosplan.schema import loads, read_text
+
+        data = loads(read_text(p, "captures file", max_bytes=2**30), "json", f"captures file {p}")
         if isinstance(data, list):
             return "plane"
         if isinstance(data, dict):

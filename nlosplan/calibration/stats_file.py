@@ -12,8 +12,6 @@ Every check fails with one line naming the field (``UserError``).
 
 from __future__ import annotations
 
-import json
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -266,16 +264,11 @@ def parse_stats(data: dict, path: str = "") -> StatsFile:
 
 def read_tables(path) -> dict:
     """The raw tables of a ``.toml`` or ``.json`` statistics file (one-line errors for unreadable files)."""
+    from nlosplan.schema import loads, read_text
+
     p = Path(path)
-    try:
-        text = p.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"cannot read statistics file {p}: {exc.strerror if isinstance(exc, OSError) else exc}") \
-            from None
-    try:
-        return tomllib.loads(text) if p.suffix == ".toml" else json.loads(text)
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise UserError(f"{p} is not a valid statistics file: {str(exc).splitlines()[0]}") from None
+    # a FIFO, binary, nesting too deep, a key twice: one line
+    return loads(read_text(p, "statistics file"), "toml" if p.suffix == ".toml" else "json", f"statistics file {p}")
 
 
 def load_stats(path) -> StatsFile:

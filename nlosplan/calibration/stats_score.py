@@ -13,7 +13,6 @@ DENALI presets carry theirs (:mod:`nlosplan.sensor_models.presets_denali`).
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -63,13 +62,10 @@ def parse_scene_table(data: dict, where: str) -> tuple[dict, dict]:
 
 def load_scene_table(path) -> tuple[dict, dict]:
     """Read a scene table TOML: ``(scene, nuisances)``."""
+    from nlosplan.schema import loads, read_text
+
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text())
-    except OSError as exc:
-        raise UserError(f"cannot read scene table {p}: {exc.strerror}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"{p} is not a valid scene table: {str(exc).splitlines()[0]}") from None
+    data = loads(read_text(p, "scene table"), "toml", f"scene table {p}")
     return parse_scene_table(data, str(p))
 
 

@@ -34,7 +34,6 @@ Method
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,13 +103,10 @@ def load_distance_captures(path) -> DistanceCaptures:
     UserError
         One line naming the file if it cannot be read or is invalid.
     """
+    from nlosplan.schema import loads, read_text
+
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise UserError(f"cannot read capture file {path}: {exc.strerror}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"capture file {path} is not valid JSON: {exc}") from None
+    data = loads(read_text(path, "capture file", max_bytes=2**30), "json", f"capture file {path}")
     if not isinstance(data, list) or not data:
         raise UserError(f"capture file {path} must hold a non-empty JSON list of captures")
     try:

@@ -15,7 +15,7 @@ import sys
 from nlosplan import __version__
 import importlib
 
-from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, examples
+from nlosplan.cli.common import EXAMPLES, EXIT_USAGE, Parser, Terminated, examples
 from nlosplan.errors import UserError
 from nlosplan.resources import keep_freed_memory
 
@@ -53,7 +53,48 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+    """Entry point; returns the exit code.
+
+    0: done; 2: a user error, one line on stderr (also when standard output cannot be written, e.g. a full
+    disk); 130: interrupted (Ctrl-C, SIGINT); 143: terminated (SIGTERM, where a command takes it: the rig
+    commands finalize on it as on Ctrl-C). Run as the program (``argv`` None), a Ctrl-C or SIGTERM that comes
+    while Python shuts down after the work ends the process with 130/143, never 0.
+    """
+    if argv is not None:   # called in a program (tests): its stdout is left as it is
+        return _main(argv)
+    sys.stdout = _Stdout(sys.stdout)
+    try:
+        return _main(argv)
+    finally:
+        _late_signals()
+
+
+class _Stdout:
+    """Standard output that remembers a failed write (a full disk under it): said in one line, not at exit."""
+
+    def __init__(self, inner):
+        self._inner = inner
+        self.failed: OSError | None = None
+
+    def write(self, text):
+        try:
+            return self._inner.write(text)
+        except OSError as exc:
+            self.failed = exc
+            raise
+
+    def flush(self):
+        try:
+            return self._inner.flush()
+        except OSError as exc:
+            self.failed = exc
+            raise
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -61,16 +102,66 @@ def main(argv: list[str] | None = None) -> int:
         func = getattr(args, "func", None)
         if func is None:
             raise UserError(f"give a command: {', '.join(ROOMS)} (see 'nlosplan --help')")
-        return int(func(args) or 0)
+        code = int(func(args) or 0)
+        sys.stdout.flush()   # a full disk under stdout fails here, with one line, not at exit
+        return code
     except UserError as exc:
         print(f"nlosplan: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:   # a rig run says where it stopped and what finalize did
-        print(f"nlosplan: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
-        return 130
+        if argv is None:               # the program: a second Ctrl-C while this line is written changes nothing
+            _ignore_signals()
+        what = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted"
+        print(f"nlosplan: {what}{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
     except BrokenPipeError:  # output piped into e.g. `head`, which closed early
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _stdout_to_devnull()
         return 0
+    except OSError as exc:
+        failed = getattr(sys.stdout, "failed", None)
+        if failed is None:
+            raise
+        _stdout_to_devnull()
+        print(f"nlosplan: error: cannot write to standard output ({failed.strerror or failed}); files the command "
+              "wrote are kept", file=sys.stderr)
+        return EXIT_USAGE
 
+
+def _stdout_to_devnull() -> None:
+    """Point file descriptor 1 at /dev/null, so what is still buffered for it is dropped quietly at exit."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
+def _ignore_signals() -> None:
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+
+def _late_signals() -> None:
+    """After the command: SIGINT or SIGTERM during Python's shutdown (atexit hooks, threads) ends the process at
+    once with 130 or 143; the outputs are written and the stores closed by then."""
+    import os
+    import signal
+    import threading
+
+    def now(signum, frame):
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(128 + signum)
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(sig) is not signal.SIG_IGN:
+                signal.signal(sig, now)

@@ -9,6 +9,7 @@ from pathlib import Path
 from nlosplan.cli.calibrate_plane import zone_list
 from nlosplan.cli.common import emit, int_type, note, number_type, progress_bar, seed_type
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_number
 
 EXAMPLES = (
     "nlosplan calibrate ../shared/data/tmf882x_distance/distance_data_even.json --out out/calibrated.toml "
@@ -83,7 +84,7 @@ def _parse_start(text: str | None) -> dict:
     for item in text.split(","):
         key, sep, value = item.partition("=")
         try:
-            out[key.strip()] = float(value)
+            out[key.strip()] = parse_number(value)
         except ValueError:
             sep = ""
         if not sep or not key.strip():

@@ -6,6 +6,7 @@ import time
 
 from nlosplan.cli.common import emit, note, progress_bar
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int
 
 #: Options that belong to the single-zone global model (``--model global``) only.
 GLOBAL_ONLY = ("steps", "pulse", "start", "holdout", "bootstrap", "lights")
@@ -39,7 +40,7 @@ def _value_lines(values: dict, errors: dict) -> list[str]:
 def zone_list(text: str, n: int) -> list[int]:
     """Flat zone indices from ``--zones`` text like ``"0,4"`` (each in 0..n-1)."""
     try:
-        zones = [int(v) for v in text.split(",") if v.strip()]
+        zones = [parse_int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         zones = []
     if not zones or any(not 0 <= z < n for z in zones):

@@ -12,6 +12,7 @@ from typing import Callable
 from nlosplan.errors import UserError
 from nlosplan.progress import Progress
 from nlosplan.resources import MAX_SEED
+from nlosplan.schema import QUANTITIES, parse_int, parse_number, shown
 
 EXIT_USAGE = 2
 _INT_COLUMNS = ("position", "repeat")  # --where columns that take integers
@@ -30,14 +31,23 @@ def names_type(kind: str, allowed) -> Callable[[str], list[str]]:
     return parse
 
 
+def _number(text: str, cast):
+    """``text`` parsed strictly (ASCII digits only) as ``cast`` (int or float); ArgumentTypeError otherwise."""
+    try:
+        return parse_int(text) if cast is int else cast(parse_number(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def number_type(cast, *, zero_ok: bool = False, hi: float | None = None) -> Callable[[str], float]:
-    """An argparse type: a finite number > 0 (>= 0 with ``zero_ok``; at most ``hi`` when given)."""
+    """An argparse type: a finite number > 0 (>= 0 with ``zero_ok``; at most ``hi`` when given).
+
+    Written in ASCII digits (``1_0`` and other scripts' digits are refused). A flag named in
+    :data:`FLAG_QUANTITIES` is also held to its physical range (see :class:`Parser`).
+    """
 
     def parse(text: str):
-        try:
-            value = cast(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if cast is int else 'a number'}") from None
+        value = _number(text, cast)
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{text} is not a finite number")
         if not (value >= 0 if zero_ok else value > 0):
@@ -47,6 +57,63 @@ def number_type(cast, *, zero_ok: bool = False, hi: float | None = None) -> Call
         return value
 
     return parse
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: any finite number written in ASCII (what a bare ``type=float`` means here)."""
+    value = _number(text, float)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+    return value
+
+
+def strict_int(text: str) -> int:
+    """An argparse type: an integer in ASCII digits (what a bare ``type=int`` means here)."""
+    return _number(text, int)
+
+
+#: Flags that set a physical quantity, and which one (:data:`nlosplan.schema.QUANTITIES`): every value of such a
+#: flag, in every command, is held to that range when it is parsed, before any work.
+FLAG_QUANTITIES = {
+    "--jitter-ps": "jitter_fwhm_ps",
+    "--bin-width-ps": "bin_width_ps",
+    "--photon-scale": "photon_scale",
+    "--settle": "settle_s",
+    "--feed": "feed_mm_min",
+    "--time-scale": "time_scale",
+    "--limits": "gantry_mm",
+    "--target-rmse": "target_rmse_m",
+    "--object-albedo": "albedo",
+    "--diffuse-albedo": "albedo",
+    "--albedo": "albedo",
+    "--wall-distance": "distance_m",
+    "--distance": "distance_m",
+    "--min-distance": "min_distance_m",
+    "--object-size": "object_size_m",
+    "--object-yaw": "angle_deg",
+    "--yaw": "angle_deg",
+    "--pitch": "angle_deg",
+    "--samples": "wall_samples",
+    "--seconds": "seconds",
+    "--max-seconds": "budget_s",
+    "--width": "model_width",
+    "--threads": "threads",
+}
+
+
+#: Flags that name a file or folder: an empty value is refused when parsed (it would silently mean the current
+#: folder, or nothing). So is an empty ``--out DIR`` (a folder; ``calibrate --out ''`` means no file).
+PATH_FLAGS = ("--store", "--sensor", "--config", "--plan", "--rig-file", "--positions-json", "--real",
+              "--pause-file", "--capture-sensor")
+
+
+def _numbers(value):
+    """The numbers in a parsed value (a number, or nested lists/tuples of them)."""
+    if isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _numbers(v)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield value
 
 
 def seed_type():
@@ -59,12 +126,38 @@ def zones_type(text: str) -> tuple[int, int]:
     from nlosplan.sensor_models.config import MAX_ZONES_PER_AXIS
 
     try:
-        rows, cols = (int(v) for v in text.lower().split("x"))
+        rows, cols = (parse_int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} must look like 3x3 or 8x8 (rows x columns)") from None
+        raise argparse.ArgumentTypeError(f"{shown(text)} must look like 3x3 or 8x8 (rows x columns, ASCII digits)") \
+            from None
     if not (1 <= rows <= MAX_ZONES_PER_AXIS and 1 <= cols <= MAX_ZONES_PER_AXIS):
         raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: 1 to {MAX_ZONES_PER_AXIS} zones per axis")
     return rows, cols
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM as an interrupt (exit 143): the cleanups of Ctrl-C (a rig run's finalize) run for it too."""
+
+
+@contextmanager
+def sigterm_interrupts():
+    """While the block runs, SIGTERM (a service manager's stop, ``kill``) raises :class:`Terminated` in the main
+    thread, like Ctrl-C raises KeyboardInterrupt: what cleans up after Ctrl-C cleans up after it."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise Terminated()
+
+    old = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
 
 
 def warn(message: str) -> None:
@@ -76,10 +169,7 @@ def int_type(lo: int, hi: int | None = None):
     """An argparse type: an integer from ``lo`` to ``hi`` (no upper bound when None)."""
 
     def parse(text: str) -> int:
-        try:
-            n = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        n = _number(text, int)
         if n < lo or (hi is not None and n > hi):
             raise argparse.ArgumentTypeError(f"{n} is out of range; allowed: {lo} to {hi}" if hi is not None
                                              else f"{n} must be >= {lo}")
@@ -102,7 +192,7 @@ def parse_where(text: str | None) -> dict:
         values = [v.strip() for v in value.split("|") if v.strip()]
         if key in _INT_COLUMNS:
             try:
-                values = [int(v) for v in values]
+                values = [parse_int(v) for v in values]
             except ValueError:
                 raise UserError(f"--where {key}={value}: {key} takes integers") from None
         where[key] = values[0] if len(values) == 1 else values
@@ -111,7 +201,38 @@ def parse_where(text: str | None) -> dict:
 
 
 class Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line and exit 2."""
+    """ArgumentParser whose errors are one line and exit 2, and whose numbers are checked.
+
+    A bare ``type=int`` or ``type=float`` reads ASCII digits only (and a float must be finite); a flag of
+    :data:`FLAG_QUANTITIES` must lie within its physical range (every number of it, for a list or a pair); a
+    flag of :data:`PATH_FLAGS` must not be empty.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("type", int, strict_int)
+        self.register("type", float, finite_float)
+
+    def _get_value(self, action, arg_string):  # noqa: D401 - argparse API: one value of one flag
+        if arg_string == "" and (any(o in PATH_FLAGS for o in action.option_strings)
+                                 or ("--out" in action.option_strings and action.metavar in ("DIR", "ROOT"))):
+            raise argparse.ArgumentError(action, "give a path (it is empty)")
+        value = super()._get_value(action, arg_string)
+        names = [QUANTITIES[FLAG_QUANTITIES[o]] for o in action.option_strings if o in FLAG_QUANTITIES]
+        for q in names[:1]:
+            for v in _numbers(value):
+                if not math.isfinite(v) or not q.contains(v):
+                    raise argparse.ArgumentError(action, f"{arg_string if len(arg_string) <= 40 else f'{v:g}'} is "
+                                                         f"out of range; allowed: {q.allowed()}")
+        return value
+
+    def format_help(self) -> str:
+        """The help, where each flag of :data:`FLAG_QUANTITIES` says its range (``[allowed: 1 to 1e+06 ps]``)."""
+        for action in self._actions:
+            names = [o for o in action.option_strings if o in FLAG_QUANTITIES]
+            if names and action.help and "[allowed:" not in action.help:
+                action.help += f" [allowed: {QUANTITIES[FLAG_QUANTITIES[names[0]]].allowed()}]"
+        return super().format_help()
 
     def error(self, message: str):  # noqa: D401 - argparse API
         raise UserError(f"{self.prog}: {message} (see '{self.prog} --help')")

@@ -17,13 +17,14 @@ def _progress(args, desc: str, unit: str):
         yield lambda done, total, text: bar.set(done, total, text)
 
 
-def _store(args, *, create: bool, synchronous: str = "FULL"):
-    """The store of ``--store``: opened read-only unless the command writes (``create``)."""
+def _store(args, *, create: bool, synchronous: str = "FULL", check: bool = False):
+    """The store of ``--store``: opened read-only unless the command writes (``create``); with ``check`` after
+    SQLite's quick check (a damaged store is one line before anything is read)."""
     from nlosplan.data.store import CaptureStore
 
     if create:
         return CaptureStore(args.store, create=True, synchronous=synchronous)
-    return CaptureStore(args.store, readonly=True)
+    return CaptureStore(args.store, readonly=True, check=check)
 
 
 def _check_store_target(path) -> None:
@@ -129,7 +130,7 @@ def _cmd_export(args) -> int:
     from nlosplan.files import check_output_dir, writing
 
     check_output_dir(args.out)
-    with _store(args, create=False) as store, _progress(args, "export DENALI", "file") as progress, \
+    with _store(args, create=False, check=True) as store, _progress(args, "export DENALI", "file") as progress, \
             writing(kept="the files written before are complete", cont="free some space and rerun the same command "
                                                                       "(equal files are left alone)"):
         res = export_denali(store, args.out, overwrite=args.overwrite, progress=progress, **_where(args))

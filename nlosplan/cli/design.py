@@ -74,7 +74,7 @@ def _cluster(text: str) -> str:
     """``tcp://HOST:PORT`` or ``local:N`` (checked before any work starts)."""
     if text.startswith("tcp://") and ":" in text[6:]:
         return text
-    if text.startswith("local:") and text[6:].isdigit() and int(text[6:]) >= 1:
+    if text.startswith("local:") and text[6:].isascii() and text[6:].isdigit() and int(text[6:]) >= 1:
         return text
     raise argparse.ArgumentTypeError(f"{text!r}: give tcp://HOST:PORT (a running Dask scheduler) or local:N (N >= 1)")
 

@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int
 
 __all__ = ["LiveView", "add_live_option", "ask_approval", "live_page"]
 
@@ -33,7 +34,7 @@ def _address(text: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
     host = host.strip("[]") if sep else "127.0.0.1"
     try:
-        p = int(port)
+        p = parse_int(port)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: give PORT or HOST:PORT, e.g. 8050 or 0.0.0.0:8050") from None
     if not 0 <= p <= 65535:

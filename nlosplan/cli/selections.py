@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from nlosplan.schema import parse_int
+
 __all__ = ["choice_list", "fidelity_level", "object_list", "position_list"]
 
 
@@ -38,7 +40,7 @@ def position_list(text: str) -> list[int]:
     for tok in (t.strip() for t in text.split(",")):
         lo, sep, hi = tok.partition("-")
         try:
-            a, b = int(lo), int(hi if sep else lo)
+            a, b = parse_int(lo), parse_int(hi if sep else lo)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{tok!r} is not a position N or a range N-M "
                                              "(e.g. 0-99 or 0,5,9)") from None

@@ -60,6 +60,7 @@ def resolve_page(path, *, planner=None, run=None, read_only=False):
             raise UserError(f"{p} is a design output folder: --planner and --run belong to a capture store's page")
         return Page("design", p)
     if is_store(p):
+        _check_store(p)
         return Page("rig", p, planner_dir=None if planner is None else Path(planner), run_id=run,
                     actions=planner is not None and not read_only)
     if p.is_dir() and (p / PLANNER).is_file():
@@ -71,9 +72,18 @@ def resolve_page(path, *, planner=None, run=None, read_only=False):
         if not is_store(store):
             raise UserError(f"{p}/rig_run.json names the store {store}, which is not a capture store here: "
                             f"give it, nlosplan serve STORE --planner {p}")
+        _check_store(store)
         return Page("rig", store, planner_dir=p, run_id=run, actions=not read_only)
     raise UserError(f"{p} is neither a design output folder (no design_checkpoint.json or "
                     "design_evaluations.jsonl) nor a capture store")
+
+
+def _check_store(path) -> None:
+    """A store opened once read-only with SQLite's quick check before it is served: a damaged one is one line."""
+    from nlosplan.data.store import CaptureStore
+
+    with CaptureStore(path, readonly=True, check=True):
+        pass
 
 
 def with_token(page, host: str, token: str | None, no_token: bool):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from nlosplan.cli.common import emit, int_type, note, number_type, seed_type, sub_parser, zones_type
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int, parse_number
 from nlosplan.files import writing
 from nlosplan.sensor_models.config import MAX_BINS
 from nlosplan.simulators import BACKENDS
@@ -94,7 +95,7 @@ def _given(args, **names: str) -> dict:
 def _parse_xy(text: str) -> tuple[float, float]:
     """``--object-xy X,Y`` as two floats (metres); the corner scene checks the values."""
     try:
-        x, y = (float(v) for v in text.split(","))
+        x, y = (parse_number(v) for v in text.split(","))
     except ValueError:
         raise UserError(f"--object-xy {text!r} must be two numbers X,Y in metres, e.g. 0.45,0.30 "
                         "(write --object-xy=-0.2,0.3 for a negative X)") from None
@@ -104,7 +105,7 @@ def _parse_xy(text: str) -> tuple[float, float]:
 def _parse_zones(text: str) -> list[tuple[int, int]]:
     """``--only-zones "R,C;R,C"`` as (row, col) pairs; the simulator checks them against the zone grid."""
     try:
-        zones = [tuple(int(v) for v in item.split(",")) for item in text.split(";") if item.strip()]
+        zones = [tuple(parse_int(v) for v in item.split(",")) for item in text.split(";") if item.strip()]
     except ValueError:
         zones = []
     if not zones or any(len(z) != 2 for z in zones):

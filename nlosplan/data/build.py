@@ -207,40 +207,45 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
                     y=float(xy[p, 1]), lights=light, zones=zones, repeat=r, source=SOURCE, seed=int(seed),
                     variant=variant, scene=scene, backend="fast", fidelity=fidelity_label)
 
-    for obj in objects:
-        for size in sizes:
-            for light in lights:
-                group = f"{obj}_{size} lights {light}"
-                keys = {(p, r): capture_key(labels(obj, size, light, p, r), h)
-                        for p in positions for r in range(repeats)}
-                if all(k in stored for k in keys.values()):
-                    groups_skipped += 1
-                    skipped += len(keys)
-                    done += len(keys)
-                    if progress:
-                        progress(done, total, f"{group}: stored already")
-                    continue
-                for chunk in batches:
-                    missing = [(p, r) for p in chunk for r in range(repeats) if keys[(p, r)] not in stored]
-                    skipped += len(chunk) * repeats - len(missing)
-                    if missing:
-                        t0 = time.perf_counter()
-                        scenes = [denali_scene(obj, size, p, light, **options) for p in chunk]
-                        sim = expected_batch(scenes, sensor, fidelity=knobs)
-                        messages += [w for w in sim.warnings if w not in messages]
-                        seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
-                        counts = draw_captures(sim.expected, seeds, repeats, sensor)
-                        t1 = time.perf_counter()
-                        index = {p: i for i, p in enumerate(chunk)}
-                        items = [(counts[index[p], r], labels(obj, size, light, p, r),
-                                  {"scene_meta": scenes[index[p]].meta, "scene_seed": seeds[index[p]],
-                                   "fidelity_knobs": knobs, "simulator": sim_meta})
-                                 for p, r in missing]
-                        added += store.put_many(items, sensor=sensor).added
-                        t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
-                    done += len(chunk) * repeats
-                    if progress:
-                        progress(done, total, f"{group}: positions {chunk[0]}-{chunk[-1]}")
+    # one build of these captures at a time: an identical build started meanwhile stops at once, before simulating
+    identity = json.dumps([h, int(seed), variant, objects, sizes, positions, lights, int(repeats), batch])
+    with store.writer(f"dataset build #{hashlib.sha256(identity.encode()).hexdigest()[:12]}"):
+        for obj in objects:
+            for size in sizes:
+                for light in lights:
+                    group = f"{obj}_{size} lights {light}"
+                    keys = {(p, r): capture_key(labels(obj, size, light, p, r), h)
+                            for p in positions for r in range(repeats)}
+                    if all(k in stored for k in keys.values()):
+                        groups_skipped += 1
+                        skipped += len(keys)
+                        done += len(keys)
+                        if progress:
+                            progress(done, total, f"{group}: stored already")
+                        continue
+                    for chunk in batches:
+                        # stored meanwhile by another build (a concurrent one with other objects or positions) counts
+                        missing = [(p, r) for p in chunk for r in range(repeats)
+                                   if keys[(p, r)] not in stored and not store.has(keys[(p, r)])]
+                        skipped += len(chunk) * repeats - len(missing)
+                        if missing:
+                            t0 = time.perf_counter()
+                            scenes = [denali_scene(obj, size, p, light, **options) for p in chunk]
+                            sim = expected_batch(scenes, sensor, fidelity=knobs)
+                            messages += [w for w in sim.warnings if w not in messages]
+                            seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
+                            counts = draw_captures(sim.expected, seeds, repeats, sensor)
+                            t1 = time.perf_counter()
+                            index = {p: i for i, p in enumerate(chunk)}
+                            items = [(counts[index[p], r], labels(obj, size, light, p, r),
+                                      {"scene_meta": scenes[index[p]].meta, "scene_seed": seeds[index[p]],
+                                       "fidelity_knobs": knobs, "simulator": sim_meta})
+                                     for p, r in missing]
+                            added += store.put_many(items, sensor=sensor).added
+                            t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
+                        done += len(chunk) * repeats
+                        if progress:
+                            progress(done, total, f"{group}: positions {chunk[0]}-{chunk[-1]}")
     for m in messages:
         warnings.warn(m, NLOSWarning, stacklevel=2)
     seconds = time.perf_counter() - t_start

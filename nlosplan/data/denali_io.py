@@ -31,6 +31,7 @@ import numpy as np
 from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError
 from nlosplan.files import save_npy, write_json
+from nlosplan.schema import check_quantity, loads, parse_int, read_text
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.denali import DENALI_OBJECTS, class_group
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
@@ -66,18 +67,28 @@ def load_positions(path=None) -> dict[int, tuple[float, float]]:
         from nlosplan.denali import positions_xy
 
         return {p: (float(x), float(y)) for p, (x, y) in enumerate(positions_xy())}
-    try:
-        raw = json.loads(Path(path).read_text(encoding="utf-8"))
-        out = {}
-        for key, value in raw.items():
-            if key.startswith("frame"):
-                out[int(key.split("_", 1)[0].removeprefix("frame"))] = (float(value[0]), float(value[1]))
-        return out
-    except OSError as exc:
-        raise UserError(f"cannot read positions file {path}: {exc.strerror}") from None
-    except (ValueError, TypeError, IndexError, AttributeError) as exc:
-        raise UserError(f"positions file {path} is not a tag1_positions.json ({{'frameN_tag1': [x, y, ...]}}): "
-                        f"{str(exc).splitlines()[0]}") from None
+    where = f"positions file {path}"
+    raw = loads(read_text(path, "positions file"), "json", where)  # FIFO, binary, depth, duplicate keys: one line
+    if not isinstance(raw, dict):
+        raise UserError(f"{where} is not a tag1_positions.json ({{'frameN_tag1': [x, y, ...]}}): it holds a "
+                        f"{type(raw).__name__}")
+    out = {}
+    for key, value in raw.items():
+        if not key.startswith("frame"):
+            continue
+        try:
+            number = parse_int(key.split("_", 1)[0].removeprefix("frame"))
+            if not isinstance(value, list) or len(value) < 2 or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in value[:2]):
+                raise TypeError
+            xy = (float(value[0]), float(value[1]))
+        except (ValueError, TypeError, OverflowError):
+            raise UserError(f"{where} is not a tag1_positions.json ({{'frameN_tag1': [x, y, ...]}}): entry "
+                            f"{key[:40]!r} is not a frame number with [x, y, ...] in metres") from None
+        for axis, v in zip("xy", xy):   # NaN or 1e308 would be stored as a NULL or absurd label
+            check_quantity("position_m", v, f"{where}: {key[:40]} {axis}")
+        out[number] = xy
+    return out
 
 
 def _pickle_refusal(path: Path) -> UserError:
@@ -364,7 +375,8 @@ def export_denali(store, root, *, overwrite: bool = False, progress: Progress | 
     UserError
         Nothing matches; two captures would share a file slot (filter by
         ``source``, ``sensor_hash`` or ``seed``); a scene's repeats are not
-        0..R-1; a capture lacks x, y; labels the layout cannot name.
+        0..R-1; a capture lacks x, y; labels the layout cannot name; a
+        damaged capture (checked before anything is written).
     """
     labels = store.labels(**where)
     labels = labels[labels["repeat"] >= 0]
@@ -386,6 +398,8 @@ def export_denali(store, root, *, overwrite: bool = False, progress: Progress | 
     pos = labels.groupby("position")[["x", "y"]].nunique()
     if (pos > 1).any().any():
         raise UserError(f"positions {sorted(pos.index[(pos > 1).any(axis=1)])} have several (x, y) labels")
+    for _ in store.iter_captures(**where):   # every histogram checked before the first file: a damaged one is one
+        pass                                 # line naming it, and nothing is written
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     inv_sizes, inv_lights = {v: k for k, v in _SIZES.items()}, {v: k for k, v in _LIGHTS.items()}

@@ -29,12 +29,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError, check_keys
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.data.dataset import LABEL_COLUMNS
 
-__all__ = ["APPLICATION_ID", "Added", "Capture", "FILTER_COLUMNS", "SCHEMA", "SCHEMA_VERSION", "capture_key",
-           "capture_row", "sensor_hash", "sensor_row", "where_sql"]
+__all__ = ["APPLICATION_ID", "Added", "Capture", "FILTER_COLUMNS", "SCHEMA", "SCHEMA_VERSION", "TABLES", "capture_key",
+           "capture_row", "decode_histogram", "sensor_hash", "sensor_row", "where_sql"]
 
 #: ``PRAGMA application_id`` of nlosplan stores ("NLOS").
 APPLICATION_ID = 0x4E4C4F53
@@ -47,6 +48,9 @@ INSERT_COLUMNS = ("key", "object", "size", "class_group", "position", "x", "y", 
                   "sensor_hash", "seed", "variant", "capture_id", "scene", "backend", "fidelity", "created_utc", "meta",
                   "dtype", "shape", "data")
 DTYPES = {"<i8": np.dtype("<i8"), "<f4": np.dtype("<f4")}
+#: The tables every store has, with the columns this code reads.
+TABLES = {"sensors": ("hash", "name", "zones", "n_bins", "bin_width_ps", "config"),
+          "captures": ("id",) + INSERT_COLUMNS}
 _REQUIRED = ("object", "size", "position", "lights", "repeat", "source")
 _OPTIONAL = {"class_group": None, "x": None, "y": None, "zones": None, "seed": None, "variant": "", "capture_id": "",
              "scene": None, "backend": None, "fidelity": None}
@@ -191,6 +195,11 @@ def _histogram_bytes(hist, sensor: SensorConfig) -> tuple[str, list, bytes]:
         raise UserError(f"histogram shape {a.shape} does not match the sensor {sensor.name!r} {expected}")
     if np.issubdtype(a.dtype, np.integer):
         dtype = "<i8"
+        top = MAX_COUNT_24BIT if sensor.saturation else None   # what reading it back accepts
+        if a.size and (a.min() < 0 or (top is not None and a.max() > top)):
+            bad = a.min() if a.min() < 0 else a.max()
+            raise UserError(f"histogram count {int(bad)} is outside 0 to {top if top is not None else 'any'}"
+                            + (" (the sensor saturates at 24 bits)" if top is not None else ""))
     elif np.issubdtype(a.dtype, np.floating):
         dtype = "<f4"
         if not np.all(np.isfinite(a)):
@@ -207,7 +216,8 @@ def capture_row(hist, labels: dict, sensor: SensorConfig, meta: dict | None) -> 
     ------
     UserError
         Unknown or missing labels, lights not on/off, zones or histogram shape
-        unlike the sensor's, non-finite values, metadata that is not JSON.
+        unlike the sensor's, non-finite values, counts below 0 or above the
+        24-bit maximum (of a sensor that saturates), metadata that is not JSON.
     """
     lab = _check_labels(labels, sensor)
     dtype, shape, data = _histogram_bytes(hist, sensor)
@@ -219,6 +229,71 @@ def capture_row(hist, labels: dict, sensor: SensorConfig, meta: dict | None) -> 
             *xy, lab["lights"], lab["zones"], int(lab["repeat"]), str(lab["source"]), h,
             None if lab["seed"] is None else int(lab["seed"]), str(lab["variant"]), str(lab["capture_id"]),
             lab["scene"], lab["backend"], lab["fidelity"], now, meta_json, dtype, json.dumps(shape), data)
+
+
+@lru_cache(maxsize=64)
+def _dims(shape) -> tuple | None:
+    """A stored ``shape`` (JSON text) as (rows, cols, bins), or None when it is not one."""
+    try:
+        dims = json.loads(shape) if isinstance(shape, (str, bytes)) else None
+    except ValueError:
+        return None
+    ok = isinstance(dims, list) and len(dims) == 3 and all(
+        isinstance(d, int) and not isinstance(d, bool) and 0 < d <= 4096 for d in dims)
+    return tuple(dims) if ok else None
+
+
+def decode_histogram(dtype, shape, data, *, what, max_count: int | None = MAX_COUNT_24BIT) -> np.ndarray:
+    """A stored histogram as an array, checked: what a damaged or edited store holds is never passed on.
+
+    Parameters
+    ----------
+    dtype, shape, data
+        The row's ``dtype`` (``<i8`` or ``<f4``), ``shape`` (JSON list) and ``data`` (bytes).
+    what : str or callable
+        Names the capture in the message, e.g. ``"capture 12 (A|8in|...) of s.sqlite"`` (a callable returning
+        it is called only when the capture is damaged).
+    max_count : int, optional
+        Largest count (default the 24-bit register's; None: no upper bound, a sensor that does not saturate).
+
+    Returns
+    -------
+    ndarray, shape (rows, cols, bins)
+        Read-only view of ``data`` in native byte order (int64 counts or float32 expectations).
+
+    Raises
+    ------
+    UserError
+        An unknown dtype, a shape that is not a list of three positive integers, a blob whose size does not
+        match them, a NaN or infinite value, counts below 0 or above ``max_count`` (one line naming the capture).
+    """
+    def damaged(reason: str) -> UserError:
+        name = what() if callable(what) else what
+        return UserError(f"{name} is damaged: {reason}; the store may be corrupt (SQLite's 'PRAGMA integrity_check' "
+                         "says where)")
+
+    if dtype not in DTYPES:
+        raise damaged(f"its histogram dtype {str(dtype)[:20]!r} is not one of {', '.join(DTYPES)}")
+    dims = _dims(shape)
+    if dims is None:
+        raise damaged(f"its histogram shape {str(shape)[:40]!r} is not [rows, cols, bins]")
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise damaged(f"its histogram is a {type(data).__name__}, not bytes")
+    want = dims[0] * dims[1] * dims[2] * DTYPES[dtype].itemsize
+    if len(data) != want:
+        raise damaged(f"its histogram holds {len(data)} bytes, {want} expected for shape {list(dims)} of {dtype}")
+    hist = np.frombuffer(data, DTYPES[dtype]).reshape(dims)
+    if dtype == "<f4":
+        if not np.isfinite(hist).all():
+            raise damaged("its histogram holds NaN or infinite values")
+    elif hist.size:
+        lo, hi = hist.min(), hist.max()
+        if lo < 0:
+            raise damaged(f"a count of {int(lo)} is negative")
+        if max_count is not None and hi > max_count:
+            raise damaged(f"a count of {int(hi)} is above {max_count}"
+                          + (", the 24-bit register's maximum" if max_count == MAX_COUNT_24BIT else ""))
+    return hist if DTYPES[dtype].isnative else hist.astype(DTYPES[dtype].newbyteorder("="))
 
 
 def where_sql(where: dict) -> tuple[str, list]:

@@ -36,8 +36,10 @@ puts the object in the LiDAR's direct field of view, and estimates travel and ti
 from __future__ import annotations
 
 import math
+import signal
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
@@ -47,6 +49,10 @@ from nlosplan.hardware.commands import Capture, CaptureResult, Checkpoint, Move,
 from nlosplan.hardware.transport import ConnectionLost, DeviceTimeout
 
 __all__ = ["DryRunReport", "Executor", "RunContext", "RunSummary", "capture_id", "dry_run", "view_problem"]
+
+
+#: Seconds of finalize that no interrupt can cut short (then a third Ctrl-C can: a device that does not answer).
+FINALIZE_GRACE_S = 3.0
 
 
 def _utc() -> str:
@@ -204,9 +210,13 @@ class Executor:
             self.summary.error = f"{type(exc).__name__}: {exc}"
             raise
         finally:
-            self._finalize()
+            held: list = []
+            with _signals_held(held):   # a second Ctrl-C (or a SIGTERM) cannot cut finalize short
+                self._finalize()
             self.summary.seconds = time.monotonic() - t0
             self.summary.sensor_stats = dict(self.rig.sensor.stats)
+            if held and self.summary.error is None:
+                signal.raise_signal(held[0])   # the plan ended, then came an interrupt: it still ends the command
         return self.summary
 
     def _do(self, cmd):
@@ -361,6 +371,29 @@ class Executor:
                 notes.append(f"gantry reports {_at(pos.xy_mm)}")
         except BaseException as exc:  # noqa: BLE001 - reported, the run's own error goes on
             notes.append(f"gantry not parked: {exc}; last reported at {_at(gantry.last_xy)}")
+
+
+@contextmanager
+def _signals_held(held: list):
+    """SIGINT and SIGTERM wait while the block runs (appended to ``held``), in the main thread; handlers restored
+    after. Finalize (stop the sensor, park the gantry) runs to its end through repeated Ctrl-C; only a third one
+    after :data:`FINALIZE_GRACE_S` stops it (a device that no longer answers; a move may wait up to its timeout)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    t0 = time.monotonic()
+
+    def hold(signum, frame):
+        held.append(signum)
+        if len(held) >= 3 and time.monotonic() - t0 > FINALIZE_GRACE_S:   # finalize stuck on a dead device
+            raise KeyboardInterrupt("finalize cut short by a third interrupt: the gantry may not be parked")
+
+    old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
 
 
 def _at(xy) -> str:

@@ -11,12 +11,12 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from nlosplan.errors import UserError
+from nlosplan.schema import loads, parse_number, read_text, shown
 from nlosplan.hardware.commands import Capture, CaptureResult, Checkpoint, Move, Plan, SetLights
 from nlosplan.denali.geometry import GRID_N, grid_index, grid_mm
 
@@ -94,15 +94,10 @@ def read_positions(path) -> list[tuple[float, float]]:
         Missing file, or a line/entry that is not two finite numbers (named with its line).
     """
     p = Path(path)
-    if not p.is_file():
-        raise UserError(f"positions file {p} does not exist")
-    text = p.read_text()
+    text = read_text(p, "positions file")   # a FIFO, a device, a folder, binary: one line
     out: list[tuple[float, float]] = []
     if p.suffix.lower() == ".json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise UserError(f"positions file {p}: not valid JSON ({exc})") from None
+        data = loads(text, "json", f"positions file {p}")   # depth, length and duplicate keys capped
         if not isinstance(data, list):
             raise UserError(f"positions file {p}: expected a JSON list of [x_mm, y_mm] pairs")
         for i, item in enumerate(data):
@@ -124,19 +119,26 @@ def read_positions(path) -> list[tuple[float, float]]:
 
 def _is_number(text: str) -> bool:
     try:
-        float(text)
+        parse_number(text)
         return True
     except ValueError:
         return False
+
+
+def _number(v) -> float:
+    """A number of a positions file: a JSON number, or text in ASCII digits (``1_0`` is refused)."""
+    if isinstance(v, bool):
+        raise TypeError(v)
+    return float(v) if isinstance(v, (int, float)) else parse_number(v)
 
 
 def _pair(item, where: str) -> tuple[float, float]:
     try:
         if len(item) != 2:
             raise ValueError
-        x, y = float(item[0]), float(item[1])
+        x, y = (_number(v) for v in item)
     except (TypeError, ValueError):
-        raise UserError(f"{where}: expected two numbers x_mm, y_mm, got {item!r}") from None
+        raise UserError(f"{where}: expected two numbers x_mm, y_mm, got {shown(item)}") from None
     if not (math.isfinite(x) and math.isfinite(y)):
         raise UserError(f"{where}: position ({x}, {y}) is not finite")
     return x, y

@@ -39,11 +39,17 @@ def plan_steps(plan) -> list[tuple[int, float, float, int]]:
 
 def runs(store) -> dict[str, list]:
     """Captures of every rig run in the store: ``{run_id: [Capture, ...]}`` (ordered by id)."""
+    from nlosplan.errors import UserError
+
     out: dict[str, list] = {}
     for cap in store.iter_captures():
-        rid = cap.meta.get("run_id")
-        if rid is not None and "step" in cap.meta:
-            out.setdefault(rid, []).append(cap)
+        rid, step = cap.meta.get("run_id"), cap.meta.get("step")
+        if rid is None or step is None:
+            continue
+        if not isinstance(rid, str) or isinstance(step, bool) or not isinstance(step, int) or step < 0:
+            raise UserError(f"capture {cap.id} of capture store {store.path} is damaged: its run id or step "
+                            f"({str(rid)[:40]!r}, {str(step)[:20]!r}) is not a name and a step number")
+        out.setdefault(rid, []).append(cap)
     return out
 
 
@@ -71,7 +77,10 @@ def run_status(store, run_id: str | None = None, show_missing: int = 10) -> list
         planned = caps[-1].meta.get("plan_total")
         spec = next((c.meta["plan_spec"] for c in caps if "plan_spec" in c.meta), None)
         missing = []
-        plan = plan_from_spec(spec) if spec else None
+        try:
+            plan = plan_from_spec(spec) if spec else None
+        except (KeyError, TypeError, ValueError, AttributeError):   # a plan_spec edited or damaged
+            raise UserError(f"run {rid!r} in {store.path}: its stored plan_spec cannot be read back") from None
         if plan is not None:
             todo = [s for s in plan_steps(plan) if s[0] not in steps]
             planned = planned or len(steps) + len(todo)

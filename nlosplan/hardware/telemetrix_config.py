@@ -199,15 +199,10 @@ def load_rig_file(path) -> TelemetrixConfig:
     UserError
         Missing or unreadable file, bad TOML, unknown keys (typos), values out of range.
     """
-    import tomllib
+    from nlosplan.schema import loads, read_text
 
     p = Path(path)
-    if not p.is_file():
-        raise UserError(f"rig file {path} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"rig file {path} is not valid TOML: {exc}") from None
+    data = loads(read_text(p, "rig file"), "toml", f"rig file {path}")  # one line: missing, FIFO, binary, too deep
     extra = set(data) - {"telemetrix"}
     if extra:
         raise UserError(f"rig file {path}: unknown table(s) {', '.join(sorted(extra))}; it holds [telemetrix]")

@@ -25,6 +25,7 @@ import numpy as np
 
 from nlosplan.constants import MAX_COUNT_24BIT
 from nlosplan.errors import UserError, check_keys
+from nlosplan.schema import QUANTITIES
 from nlosplan.sensor_models.impulse import impulse_sigma_ps
 
 FLASH_PROFILES = ("gaussian", "uniform")
@@ -176,9 +177,12 @@ class SensorConfig:
                 raise UserError(bad) from None
             if shape.size == 0 or not np.all(np.isfinite(shape)) or np.any(shape < 0):
                 raise UserError(bad)
-            total = float(shape.sum())
+            total = float(shape.sum()) if shape.max() < 1e300 else math.inf
             if total <= 0:
                 raise UserError("pulse_shape must have a positive sum")
+            if not math.isfinite(total):   # samples whose sum overflows: the shape is relative, scale it first
+                shape = shape / shape.max()
+                total = float(shape.sum())
             if abs(total - 1.0) > 1e-12:  # normalise once; re-normalising would drift in the last digit
                 shape = shape / total
             object.__setattr__(self, "pulse_shape", tuple(float(v) for v in shape))
@@ -356,8 +360,19 @@ def _integer(name: str, value: Any, lo: int, hi: int) -> None:
     _check(lo <= int(value) <= hi, f"{name}={value} is out of range; allowed: {lo} to {hi}")
 
 
+def _in_range(name: str, value: float, quantity: str | None = None) -> None:
+    """``value`` of field ``name`` within its physical range (:data:`nlosplan.schema.QUANTITIES`)."""
+    q = QUANTITIES[quantity or name]
+    _check(q.contains(value), f"{name}={value:g} is out of range; allowed: {q.allowed()}")
+
+
 def validate(cfg: SensorConfig) -> None:
-    """Check every field of ``cfg``; raise :class:`UserError` naming the first bad one."""
+    """Check every field of ``cfg``; raise :class:`UserError` naming the first bad one.
+
+    Physical fields must also lie within the ranges of :data:`nlosplan.schema.QUANTITIES`, the ones the
+    command line's flags are held to (e.g. ``bin_width_ps`` 1 ps to 1 us), so that no value makes the
+    arithmetic overflow, underflow to zero or silently empty the histogram.
+    """
     _check(isinstance(cfg.name, str) and cfg.name != "", f"name={cfg.name!r} must be a non-empty string")
     _integer("zones_rows", cfg.zones_rows, 1, MAX_ZONES_PER_AXIS)
     _integer("zones_cols", cfg.zones_cols, 1, MAX_ZONES_PER_AXIS)
@@ -365,7 +380,8 @@ def validate(cfg: SensorConfig) -> None:
     _integer("iterations", cfg.iterations, 0, 10**12)
     bw = _finite_number("bin_width_ps", cfg.bin_width_ps)
     _check(bw > 0, f"bin_width_ps={bw} must be > 0 ps")
-    _finite_number("start_offset_ps", cfg.start_offset_ps)
+    _in_range("bin_width_ps", bw)
+    _in_range("start_offset_ps", _finite_number("start_offset_ps", cfg.start_offset_ps))
     for name in ("fov_x_deg", "fov_y_deg"):
         v = _finite_number(name, getattr(cfg, name))
         _check(0 < v < 170, f"{name}={v} is out of range; allowed: 0 < fov < 170 degrees")
@@ -387,9 +403,11 @@ def validate(cfg: SensorConfig) -> None:
     ):
         v = _finite_number(name, getattr(cfg, name))
         _check(v >= 0, f"{name}={v} must be >= 0")
+        _in_range(name, v)
     step = _finite_number("pulse_shape_step_ps", cfg.pulse_shape_step_ps)
     _check(step > 0, f"pulse_shape_step_ps={step} must be > 0 ps")
-    _finite_number("pulse_shape_t0_ps", cfg.pulse_shape_t0_ps)
+    _in_range("pulse_shape_step_ps", step)
+    _in_range("pulse_shape_t0_ps", _finite_number("pulse_shape_t0_ps", cfg.pulse_shape_t0_ps))
     if cfg.pulse_shape is not None:
         _check(len(cfg.pulse_shape) <= 512, "pulse_shape may have at most 512 samples")
     _check(isinstance(cfg.pileup, bool), f"pileup={cfg.pileup!r} must be true or false")
@@ -408,10 +426,14 @@ def validate(cfg: SensorConfig) -> None:
             bad = [v for v in value if v < 0]
             if bad:
                 raise UserError(f"{name} must be >= 0; got {bad[0]}")
+        if name != "zone_time_scales":
+            for i, v in enumerate(value):
+                _in_range(f"{name}[{i}]", v, name)
     frac = _finite_number("pulse_tail_fraction", cfg.pulse_tail_fraction)
     _check(0 <= frac < 1, f"pulse_tail_fraction={frac} is out of range; allowed: 0 <= fraction < 1")
     decay = _finite_number("pulse_tail_decay_ps", cfg.pulse_tail_decay_ps)
     _check(decay > 0, f"pulse_tail_decay_ps={decay} must be > 0 ps")
+    _in_range("pulse_tail_decay_ps", decay)
     _check(frac == 0 or cfg.pulse_shape is not None,
            "pulse_tail_fraction > 0 needs a pulse_shape (the tail continues the measured pulse after its last sample)")
     walk = _finite_number("time_walk_ps", cfg.time_walk_ps)
@@ -420,3 +442,4 @@ def validate(cfg: SensorConfig) -> None:
     if cfg.dead_time_ps is not None:
         dead = _finite_number("dead_time_ps", cfg.dead_time_ps)
         _check(dead > 0, f"dead_time_ps={dead} must be > 0 ps, or left out (blind for the rest of the iteration)")
+        _in_range("dead_time_ps", dead)

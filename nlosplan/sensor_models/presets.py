@@ -28,7 +28,7 @@ import dataclasses
 from pathlib import Path
 
 from nlosplan.errors import UserError, check_keys
-from nlosplan.schema import load_table
+from nlosplan.schema import load_table, shown
 from nlosplan.sensor_models.config import ZONE_FIELDS, SensorConfig
 
 #: Values measured from ../shared/data/tmf882x_distance (TMF882x, 3x3, short
@@ -277,7 +277,7 @@ def _from_table(data: dict, path: Path) -> SensorConfig:
             data[name] = tuple(data[name])
     if base is not None:
         if not isinstance(base, str) or base not in PRESET_NAMES:
-            raise UserError(f"base = {base!r} is not a sensor preset; allowed: {', '.join(PRESET_NAMES)}")
+            raise UserError(f"base = {shown(base)} is not a sensor preset; allowed: {', '.join(PRESET_NAMES)}")
         data.setdefault("name", f"{path.stem} ({base})")
         return preset(base).replace(**data)
     missing = [f for f in fields if f not in data and f not in OPTIONAL_FILE_FIELDS]

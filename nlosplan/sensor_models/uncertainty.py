@@ -19,7 +19,6 @@ clipped to ``[lo, hi]``. Every field must be a numeric
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from pathlib import Path
 
@@ -104,13 +103,10 @@ def validate_uncertainty(data, source: str = "uncertainty") -> dict:
 
 def load_uncertainty(path) -> dict:
     """Read and validate an ``X.uncertainty.json`` file."""
+    from nlosplan.schema import loads, read_text
+
     p = Path(path)
-    try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise UserError(f"uncertainty file {p} does not exist") from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise UserError(f"cannot read {p}: {exc}") from None
+    data = loads(read_text(p, "uncertainty file"), "json", f"uncertainty file {p}")
     return validate_uncertainty(data, str(p))
 
 

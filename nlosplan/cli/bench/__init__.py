@@ -15,6 +15,7 @@ from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, r
 from nlosplan.cli.selections import choice_list, object_list
 from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int
 from nlosplan.simulators.bench import (
     DEFAULT_LEVELS,
     DEFAULT_OBJECTS,
@@ -51,7 +52,7 @@ def _cmd_bench_histogram(args) -> int:
 # ----------------------------------------------------------------- bench simulate
 def _int_list(text: str) -> list[int]:
     try:
-        out = [int(v) for v in text.split(",") if v.strip()]
+        out = [parse_int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of integers") from None
     if not out:

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import math
 from contextlib import contextmanager
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, number_type, progress_bar, seed_type
+from nlosplan.cli.common import emit, int_type, number_type, progress_bar, seed_type, sigterm_interrupts
 from nlosplan.errors import UserError
+from nlosplan.schema import check_quantity, parse_int, parse_number
 
 EXAMPLES = {
     "capture": (
@@ -43,7 +45,7 @@ def _range_list(text: str) -> list[int]:
             continue
         lo, sep, hi = part.partition("-")
         try:
-            a, b = int(lo), int(hi) if sep else int(lo)
+            a, b = parse_int(lo), parse_int(hi) if sep else parse_int(lo)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r}: use grid indices like 0-9,20,45") from None
         if not (0 <= a <= b <= 99):
@@ -56,9 +58,11 @@ def _range_list(text: str) -> list[int]:
 
 def _limits(text: str):
     try:
-        (x0, x1), (y0, y1) = [tuple(float(v) for v in axis.split(":")) for axis in text.split(",")]
+        (x0, x1), (y0, y1) = [tuple(parse_number(v) for v in axis.split(":")) for axis in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: use XMIN:XMAX,YMIN:YMAX in mm, e.g. 0:320,0:320") from None
+    if not all(math.isfinite(v) for v in (x0, x1, y0, y1)):
+        raise argparse.ArgumentTypeError(f"{text[:60]!r}: each value must be a finite number of mm")
     if not (x0 < x1 and y0 < y1):
         raise argparse.ArgumentTypeError(f"{text!r}: each minimum must be below its maximum")
     return (x0, x1), (y0, y1)
@@ -71,15 +75,26 @@ def _faults(text: str) -> dict:
             continue
         key, _, val = item.partition("=")
         if key.strip() not in FAULT_KEYS:
-            raise argparse.ArgumentTypeError(f"unknown fault {key!r}; allowed: {', '.join(FAULT_KEYS)}")
+            raise argparse.ArgumentTypeError(f"unknown fault {key[:40]!r}; allowed: {', '.join(FAULT_KEYS)}")
+        seconds = FAULT_KEYS[key.strip()] in ("slow_answer_s", "slow_ok_s")
         try:
-            v = float(val)
+            v = parse_number(val)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"fault {key}={val!r} needs a number") from None
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"fault {key}={val} must be >= 0")
+            raise argparse.ArgumentTypeError(f"fault {key}={val[:40]!r} needs a number") from None
+        hi = 3600 if seconds else 10**9
+        if not (math.isfinite(v) and 0 <= v <= hi) or (not seconds and v != int(v)):
+            raise argparse.ArgumentTypeError(f"fault {key}={val[:40]} is out of range; allowed: "
+                                             + (f"0 to {hi} s" if seconds else f"a whole number from 0 to {hi}"))
         out[FAULT_KEYS[key.strip()]] = v
     return out
+
+
+def _run_name(text: str) -> str:
+    """An argparse type: a run id (it names the captures' ``capture_id``): 1 to 200 printable characters, no '/'."""
+    if not text or len(text) > 200 or "/" in text or not text.isprintable() or text != text.strip():
+        raise argparse.ArgumentTypeError(f"{text[:40]!r}: a run id is 1 to 200 printable characters without '/' or "
+                                         "spaces around it (leave --run out for one derived from the plan)")
+    return text
 
 
 def add_motion_options(p: argparse.ArgumentParser) -> None:
@@ -202,7 +217,8 @@ def _cmd_capture(args) -> int:
     pause = (lambda: Path(args.pause_file).exists()) if args.pause_file else None
     from nlosplan.cli.live import live_page
 
-    with live_page(args, "rig", args.store, run_id=run_id), rig_failures(run_id, args.store) as hold, \
+    with sigterm_interrupts(), live_page(args, "rig", args.store, run_id=run_id), \
+            rig_failures(run_id, args.store) as hold, \
             CaptureStore(args.store) as store, _open(args, devices, store=store, run_id=run_id) as rig, \
             progress_bar(args, total, f"rig {run_id}", "capture") as bar:
         ex = hold["executor"] = Executor(rig, store, run_id=run_id, context=ctx, check_view=not args.no_view_check,
@@ -259,8 +275,8 @@ def rig_failures(run_id: str, store_path):
         todo = "free space and rerun the same command to resume" if full else "rerun the same command to resume"
         raise UserError(f"run {run_id}: {what}{' (disk full; the captures committed before are kept)' if full else ''}"
                         f"; {where()}; {todo}") from None
-    except KeyboardInterrupt:
-        raise KeyboardInterrupt(f"run {run_id} {where()}; rerun the same command to resume") from None
+    except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM as Terminated (exit 143): said the same way
+        raise type(exc)(f"run {run_id} {where()}; rerun the same command to resume") from None
 
 
 def _faults_for(kind: str, faults: dict):
@@ -310,13 +326,28 @@ def resolve_devices(args, *, seed_is_noise: bool) -> dict:
         raise UserError("--home and --unlock are GRBL's; a Telemetrix gantry has no limit switches and no alarm lock")
     if kind == "telemetrix" and args.work_offset != "auto":
         raise UserError("--work-offset is GRBL's; a Telemetrix gantry's origin is origin_mm in its --rig-file")
-    from nlosplan.hardware.grbl_frame import parse_work_offset
     from nlosplan.hardware.telemetrix_config import load_rig_file
 
     return {"emulate": emulate, "lidar": args.lidar, "gantry": args.gantry, "gantry_kind": kind,
             "telemetrix": load_rig_file(args.rig_file) if args.rig_file else None,
-            "work_offset": parse_work_offset(args.work_offset),
+            "work_offset": _work_offset(args.work_offset),
             "sensor_faults": _faults_for("lidar", faults), "gantry_faults": _faults_for("gantry", faults)}
+
+
+def _work_offset(text):
+    """``--work-offset``: auto, keep or X,Y in mm, each within the gantry's range (before anything connects)."""
+    from nlosplan.hardware.grbl_frame import parse_work_offset
+
+    if str(text).strip().lower() in ("auto", "keep"):
+        return parse_work_offset(text)
+    parts = str(text).split(",")
+    try:
+        xy = tuple(parse_number(v) for v in parts)
+    except ValueError:
+        xy = ()
+    if len(xy) != 2:
+        raise UserError(f"--work-offset {text[:40]!r}: use auto, keep, or X,Y in mm (e.g. -320,-320)")
+    return tuple(check_quantity("gantry_mm", v, f"--work-offset {axis}") for axis, v in zip("XY", xy))
 
 
 @contextmanager
@@ -387,7 +418,8 @@ def add(sub):
              CAPTURE_DESCRIPTION)
     add_device_options(c, seed_help="emulated sensor: noise seed (default: 0)")
     c.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
-    c.add_argument("--run", default=None, help="run id (default: derived from the plan and labels, so a rerun resumes)")
+    c.add_argument("--run", type=_run_name, default=None,
+                   help="run id (default: derived from the plan and labels, so a rerun resumes)")
     _plan_options(c)
     c.add_argument("--class-group", default=None, help="class group of a non-DENALI object")
     c.add_argument("--lights", default="off", choices=["on", "off"], help="room lights during the run (default: off)")
@@ -414,8 +446,8 @@ frame plus the controller's raw position, sensor and firmware configuration,
 timestamps, lights, repeat). The plan is checked dry first (limits, object
 never in the LiDAR's direct view) and the gantry's own limits at open (GRBL's
 machine space and work offset); nothing moves if a check fails. The sensor is
-stopped and the gantry parked at the end, also on errors and Ctrl-C, and the
-last line says so. Rerunning the same command resumes the run: stored captures
+stopped and the gantry parked at the end, also on errors, Ctrl-C (exit 130)
+and SIGTERM (exit 143), and the last line says so. Rerunning the same command resumes the run: stored captures
 are skipped, nothing is taken twice. A lost sensor link is reconnected and the
 frame retried; a gantry alarm ends the run (clear it, rerun with --unlock or
 --home). --emulate runs both devices as pty emulators (DENALI scene, fast

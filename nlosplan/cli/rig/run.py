@@ -8,9 +8,9 @@ import json
 import sys
 from pathlib import Path
 
-from nlosplan.cli.common import emit, int_type, number_type
+from nlosplan.cli.common import emit, int_type, number_type, sigterm_interrupts
 from nlosplan.errors import UserError
-from nlosplan.files import write_json
+from nlosplan.files import check_output_dir, write_json
 
 EXAMPLES = (
     "nlosplan rig run --emulate --planner active --budget 40 --target-rmse 0.05 --store out/loop.db",
@@ -109,9 +109,10 @@ def _cmd(args) -> int:
     args.seed = 0 if args.seed is None else args.seed
     if args.lights == "on":
         raise UserError("rig run plans with a lights-off counts model; --lights on is not supported yet")
-    out = Path(args.out)
+    out = check_output_dir(args.out, "--out")   # a read-only or file --out: one line before any work
     run_id = _run_id(args)
-    with live_page(args, "rig", args.store, planner_dir=out, run_id=run_id, actions=args.approve):
+    with sigterm_interrupts(), live_page(args, "rig", args.store, planner_dir=out, run_id=run_id,
+                                         actions=args.approve):
         out.mkdir(parents=True, exist_ok=True)
         return _loop(args, devices, out, run_id)
 
@@ -188,7 +189,7 @@ def _loop(args, devices: dict, out: Path, run_id: str) -> int:
 
 def add_rig(rsub) -> None:
     """Register ``nlosplan rig run``."""
-    from nlosplan.cli.rig.capture import add_device_options, add_mode_options, add_motion_options
+    from nlosplan.cli.rig.capture import _run_name, add_device_options, add_mode_options, add_motion_options
     from nlosplan.planner.capture import STRATEGIES
 
     p = rsub.add_parser("run", help="closed loop: capture, ingest, update, suggest the next batch (planner)",
@@ -207,7 +208,8 @@ def add_rig(rsub) -> None:
                                                           "(with --live: or for an answer on the page)")
     add_device_options(p, seed_help="planner seed, and the emulated sensor's noise seed (default: 0)")
     p.add_argument("--store", required=True, help="capture store (SQLite; created when missing)")
-    p.add_argument("--run", default=None, help="run id (default: derived from the settings, so a rerun resumes)")
+    p.add_argument("--run", type=_run_name, default=None,
+                   help="run id (default: derived from the settings, so a rerun resumes)")
     p.add_argument("--out", default="nlosplan-out/rig-run", metavar="DIR",
                    help="planner checkpoint, batch plots, rig_run.json (default: %(default)s)")
     add_motion_options(p)

@@ -13,6 +13,7 @@ from nlosplan.cli.study import active as active_study, design as design_studies
 from nlosplan.cli.common import (command_group, emit, names_type, note, number_type, parse_where, progress_bar,
                                  seed_type, sub_parser)
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_number
 from nlosplan.experiments.jitter import DEFAULT_JITTER_PS, DEFAULT_MODELS, STUDY_ZONES
 from nlosplan.tasks.names import DEFAULT_EPOCHS, MODEL_NAMES, SPLITS, TASKS
 
@@ -28,7 +29,7 @@ def _jitter_levels(text: str) -> list[float]:
         if not item:
             continue
         try:
-            value = float(item.removesuffix("ps").strip())
+            value = parse_number(item.removesuffix("ps").strip())
         except ValueError:
             raise argparse.ArgumentTypeError(f"{item!r} is not a number (jitter FWHM in ps)") from None
         if not (math.isfinite(value) and value >= 0):

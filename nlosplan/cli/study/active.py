@@ -8,6 +8,7 @@ import time
 
 from nlosplan.cli.common import emit, int_type, names_type, number_type
 from nlosplan.errors import UserError
+from nlosplan.schema import parse_int, parse_number
 
 DEFAULT_OUT = "nlosplan-out/active"
 EXAMPLES = (
@@ -53,7 +54,7 @@ strategy and seed (the default 6 strategies x 3 seeds: about 5 min)."""
 
 def _seeds(text: str) -> list[int]:
     try:
-        out = [int(v) for v in text.split(",") if v.strip()]
+        out = [parse_int(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: seeds are comma-separated integers, e.g. 0,1,2") from None
     if not out:
@@ -63,10 +64,10 @@ def _seeds(text: str) -> list[int]:
 
 def _targets(text: str) -> list[float]:
     try:
-        out = [float(v) for v in text.split(",") if v.strip()]
+        out = [parse_number(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: targets are comma-separated metres, e.g. 0.04,0.05") from None
-    if not out or any(not v > 0 for v in out):
+    if not out or any(not 0 < v < float("inf") for v in out):
         raise argparse.ArgumentTypeError(f"{text!r}: give targets > 0 m, e.g. 0.04,0.05")
     return out
 

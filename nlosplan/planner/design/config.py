@@ -44,7 +44,7 @@ from pathlib import Path
 
 from nlosplan.errors import UserError, check_keys
 from nlosplan.schema import (NUMBER, STRING, Spec, check_types, int_in, list_of, load_table, number_in, one_of,
-                             pair_of, predicate, table_of)
+                             pair_of, predicate, quantity, table_of)
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
@@ -92,13 +92,13 @@ def _schema() -> dict:
     count = int_in(1)
     return {
         "space": {"reference": STRING, "zones": list_of(zone, min_len=1), "bin_factors": list_of(int_in(1, 64), min_len=1),
-                  "n_bins": pair_of(int_in(1, 4096)), "jitter_fwhm_ps": pair_of(number_in(0)),
-                  "pulse_fwhm_ps": pair_of(number_in(0)), "photon_fraction": pair_of(number_in(0, 1)),
+                  "n_bins": pair_of(int_in(1, 4096)), "jitter_fwhm_ps": pair_of(quantity("jitter_fwhm_ps")),
+                  "pulse_fwhm_ps": pair_of(quantity("pulse_fwhm_ps")), "photon_fraction": pair_of(number_in(0, 1)),
                   "axes": list_of(STRING, min_len=1)},
         "requirement": {"task": one_of("loc", "shape", "size"), "threshold": NUMBER, "condition": STRING},
-        "cost": {k: number_in(0) for k in CostModel().to_dict()},
-        "search": {"grid_points": count, "refine_steps": int_in(0), "seeds": int_in(1, 20), "candidates": count,
-                   "optimize_evals": count, "fidelity": table_of()},
+        "cost": {k: number_in(0, 1000) for k in CostModel().to_dict()},   # relative weights (defaults 0.1-0.3)
+        "search": {"grid_points": int_in(1, 100), "refine_steps": int_in(0, 20), "seeds": int_in(1, 20),
+                   "candidates": int_in(1, 100), "optimize_evals": int_in(1, 10_000), "fidelity": table_of()},
         "bound": {"draws": count, "looks": count, "crlb_repeats": count},
         "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
                     "bootstrap": int_in(0)},

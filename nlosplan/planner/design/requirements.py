@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from nlosplan.errors import UserError
+from nlosplan.schema import QUANTITIES, parse_number
 
 __all__ = ["Condition", "Requirement", "DEFAULT_REQUIREMENTS", "METRIC_OF_TASK", "Task", "parse_requirement"]
 
@@ -71,6 +72,10 @@ class Condition(NamedTuple):
         return labels[self.column].astype(str).to_numpy() == self.value
 
 
+#: Largest localization requirement, metres (the physical range of a localization RMSE: ``target_rmse_m``).
+LOC_MAX_M = QUANTITIES["target_rmse_m"].hi
+
+
 @dataclass(frozen=True)
 class Requirement:
     """``metric <= threshold`` (localization) or ``>= threshold`` (classification) for one task.
@@ -94,9 +99,9 @@ class Requirement:
             raise UserError(f"unknown task {self.task!r}; allowed: {', '.join(METRIC_OF_TASK)}")
         object.__setattr__(self, "task", Task(self.task))
         t = float(self.threshold)
-        if not (t > 0) or (not self.smaller_is_better and t > 1):
+        if not (t > 0) or (not self.smaller_is_better and t > 1) or (self.smaller_is_better and t > LOC_MAX_M):
             raise UserError(f"{self.task} threshold {self.threshold} must be "
-                            f"{'> 0 (metres)' if self.smaller_is_better else 'in (0, 1]'}")
+                            f"{f'> 0 and <= {LOC_MAX_M:g} (metres)' if self.smaller_is_better else 'in (0, 1]'}")
         object.__setattr__(self, "threshold", t)
         if self.condition is not None:
             col, val = self.condition
@@ -164,7 +169,7 @@ def parse_requirement(text: str) -> Requirement:
         raise UserError(f"requirement {text!r}: {task}'s {METRIC_OF_TASK[task][0]} is {what}; "
                         f"write {task}{want}{value}")
     try:
-        threshold = float(value)
+        threshold = parse_number(value)
     except ValueError:
         raise UserError(f"requirement {text!r}: {value!r} is not a number") from None
     return Requirement(task, threshold, Condition(col, val) if col else None)

@@ -21,7 +21,7 @@ from urllib.parse import quote
 
 import numpy as np
 
-from nlosplan.data.records import APPLICATION_ID, DTYPES
+from nlosplan.data.records import APPLICATION_ID, decode_histogram
 from nlosplan.errors import UserError
 from nlosplan.planner.capture.approval import read_request
 
@@ -200,12 +200,16 @@ class RigWatch:
         return bool(rows)
 
     def _read_hist(self, cid: int) -> None:
-        row = self._db.execute("SELECT dtype, shape, data, capture_id, zones FROM captures WHERE id = ?",
+        row = self._db.execute("SELECT dtype, shape, CAST(data AS BLOB), capture_id, zones FROM captures WHERE id = ?",
                                (cid,)).fetchone()
         if row is None:
             return
         dtype, shape, data, capture_id, zones = row
-        hist = np.frombuffer(data, DTYPES[dtype]).reshape(json.loads(shape)).astype(np.float64)
+        try:   # a damaged capture is said on the page, never a 500 on every load
+            hist = decode_histogram(dtype, shape, data, what=f"capture {cid}", max_count=None).astype(np.float64)
+        except UserError as exc:
+            self.error = str(exc)
+            return
         self.last_hist = {"id": cid, "capture_id": capture_id, "zones": zones, "counts": hist}
 
     def _read_planner(self) -> bool:

@@ -28,6 +28,7 @@ import numpy as np
 
 from nlosplan.denali.rig import ALIASES, DENALI_OBJECTS, SIZES
 from nlosplan.errors import UserError
+from nlosplan.schema import check_quantity
 from nlosplan.simulators.meshes import load_obj, square_patch
 from nlosplan.simulators.presets.denali import object_mesh
 from nlosplan.simulators.scene import HiddenObject, LidarPose, Mesh, Rect, Scene, rigid_transform
@@ -41,14 +42,15 @@ FLOOR_SIZE = 3.0  # metres, square
 FLOOR_ALBEDO = 0.3
 
 
-def _number(name: str, value: Any, *, positive: bool = False) -> float:
+def _number(name: str, value: Any, *, positive: bool = False, quantity: str = "scene_m") -> float:
+    """A finite number within its physical range (:data:`nlosplan.schema.QUANTITIES`: metres within 100 m)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(
         value
     ):
         raise UserError(f"{name}={value!r} must be a finite number")
     if positive and value <= 0:
         raise UserError(f"{name}={value!r} must be > 0 (metres)")
-    return float(value)
+    return check_quantity(quantity, float(value), name)
 
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
@@ -146,7 +148,7 @@ def corner_scene(*, wall_distance: float = 0.5, object_xy=(0.45, 0.30), object: 
     width, height = _pair("wall_size", wall_size)
     if width <= 0 or height <= 0:
         raise UserError(f"wall_size={(width, height)!r} must be two lengths > 0 (metres)")
-    yaw = math.radians(_number("yaw_deg", yaw_deg))
+    yaw = math.radians(_number("yaw_deg", yaw_deg, quantity="angle_deg"))
     if not isinstance(lights_on, (bool, np.bool_)):
         raise UserError(f"lights_on={lights_on!r} must be true or false")
 
