@@ -76,15 +76,19 @@ def read_checkpoint_payload(path) -> object:
     UserError
         Missing or unreadable file; a file that needs another Python object (named) to load.
     """
+    import zipfile
+
     path = Path(path)
     if not path.is_file():
         raise UserError(f"DENALI checkpoint {path} does not exist")
+    if not zipfile.is_zipfile(path):
+        raise UserError(f"{path} is not a readable torch file (not the zip archive torch.save writes)")
     try:
         with torch.serialization.safe_globals(allowed_globals()):
             return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         found = _GLOBAL.search(str(exc))
-        what = f"the Python object {found.group(1)}" if found else "a Python object outside the allow-list"
+        what = f"the Python object {found.group(1)}" if found else "a Python object or operation outside the allow-list"
         raise UserError(f"{path}: refused, it needs {what} to load (only tensors and numpy arrays are read from "
                         "DENALI's checkpoints; nothing was unpickled)") from None
     except (RuntimeError, EOFError, OSError, ValueError) as exc:

@@ -277,7 +277,10 @@ def _check_inputs(histograms, targets, task, model, train_index, test_index):
         raise UserError(f"histograms must be (N >= 2, rows, cols, bins), got {x.shape}")
     settings = cell_settings(model, task)
     if task == "loc":
-        y = np.asarray(targets, dtype=np.float64)
+        try:
+            y = np.asarray(targets, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise UserError("localization targets must be finite (N, 2) x, y in metres, not names") from None
         if y.shape != (len(x), 2) or not np.isfinite(y).all():
             raise UserError(f"localization targets must be finite (N, 2) x, y in metres, got {y.shape}")
         classes = None

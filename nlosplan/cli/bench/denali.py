@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nlosplan.cli.common import emit, int_type, names_type, progress_bar, warn
+from nlosplan.cli.common import emit, int_type, names_type, note, progress_bar, warn
 
 EXAMPLES = (
     "nlosplan bench denali                              # quick budget on the CPU, full on a GPU",
@@ -46,7 +46,7 @@ per-epoch history...], "protocol", "captures", "real_source", "device", "seconds
 def _fmt(metric: str, value) -> str:
     if value is None:
         return "-"
-    return f"{100 * value:.2f} cm" if metric == "loc_rmse" else f"{100 * value:.1f} %"
+    return f"{100 * value:.2f} cm" if metric == "loc_rmse" else f"{100 * value:.2f} %"
 
 
 def _text(res: dict, sensor: str) -> str:
@@ -100,13 +100,14 @@ def _cmd(args) -> int:
     budget = args.budget or ("full" if device.startswith("cuda") else "quick")
     if device == "cpu":
         est = estimate_seconds(args.models, args.tasks, protocol, device, validation=not args.no_validation)
-        line = (f"bench denali: {protocol.describe()} on the CPU: about {est / 3600:.1f} h of training on this "
-                f"machine now (timed on a few batches), plus the captures' simulation the first time")
+        took = f"{est / 3600:.1f} h" if est >= 3600 else f"{max(1.0, est / 60):.0f} min"
+        line = (f"bench denali: {protocol.describe()} on the CPU: about {took} of training on this machine now "
+                "(timed on a few batches), plus the captures' simulation the first time")
         if protocol.budget == "full":
             warn(line + "; DENALI's 1D CNN cells take about an hour each on 2 idle cores and minutes on a GPU "
                         "(--device cuda); --budget quick for a first look")
         else:
-            warn(line)
+            note(args, line)
     with progress_bar(args, None, "bench denali", "step") as bar:
         res = run_denali_bench(args.sensor, budget=budget, models=args.models, tasks=args.tasks, device=device,
                                validation=not args.no_validation, store=args.store, objects=args.objects,
