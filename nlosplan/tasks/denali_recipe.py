@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -52,6 +51,7 @@ from torch import nn
 from nlosplan.errors import UserError
 from nlosplan.tasks.benchmark import DENALI_CELLS
 from nlosplan.tasks.denali_protocol import SEED, denali_split
+from nlosplan.tasks.denali_result import CellResult
 from nlosplan.tasks.metrics import classification_metrics, regression_metrics
 from nlosplan.tasks.models import CNN1D, MLP
 
@@ -192,83 +192,6 @@ def _prepare(histograms, log_zscore: bool) -> tuple[np.ndarray, dict]:
     mean, std = float(x.mean()), float(x.std() + 1e-6)
     x = ((x - mean) / std).astype(np.float32, copy=False)
     return x, {"input": "log1p(clip(x, 0)) z-scored over all captures", "mean": mean, "std": std}
-
-
-@dataclass(frozen=True, eq=False)
-class CellResult:
-    """One trained cell of DENALI's recipe.
-
-    Attributes
-    ----------
-    task, model : str
-    metric : {"loc_rmse", "top1_acc"}
-        What is reported (loc_rmse in metres).
-    selection : {"mae", "top1_acc"}
-        DENALI's criterion for its epoch (lower MAE, higher top-1).
-    mode : {"denali", "validation"}
-        ``"denali"``: trained on DENALI's whole training split; ``"validation"``: on it minus a seeded tenth.
-    predicted : float
-        ``metric`` at the best-on-test epoch (DENALI's choice; ``best_epoch``).
-    predicted_last_epoch : float
-        ``metric`` at the last epoch.
-    predicted_validation_epoch : float or None
-        ``metric`` on the test set at the epoch chosen on the held-out tenth (``validation_epoch``);
-        None in ``"denali"`` mode.
-    history : tuple of dict
-        Per epoch: ``epoch``, ``train_loss`` (mean over batches of the loss DENALI minimises), ``test``
-        (``loc_rmse``/``mae``/``mse`` or ``top1_acc``/``top5_acc``/``macro_f1``), ``val`` (or None),
-        ``seconds`` since the start.
-    n_train, n_val, n_test : int
-    test_index : ndarray of int
-        The test rows, in scoring order.
-    predictions : dict of str to ndarray
-        Test predictions (class indices, or (N, 2) x, y in metres) at ``"best"``, ``"last"`` and (validation
-        mode) ``"validation"`` epochs.
-    classes : tuple of str or None
-        Class names in output order (sorted, as DENALI's LabelEncoder).
-    settings : dict
-        DENALI's ``lr``, ``epochs`` (of the cell), ``batch_size``, ``log_zscore`` and the ``epochs`` run.
-    preprocessing : dict
-    seconds : float
-    device : str
-    seed : int
-    torch_threads : int
-    """
-
-    task: str
-    model: str
-    metric: str
-    selection: str
-    mode: str
-    predicted: float
-    best_epoch: int
-    predicted_last_epoch: float
-    epochs: int
-    predicted_validation_epoch: float | None
-    validation_epoch: int | None
-    history: tuple
-    n_train: int
-    n_val: int
-    n_test: int
-    test_index: np.ndarray
-    predictions: dict
-    classes: tuple | None
-    settings: dict
-    preprocessing: dict
-    seconds: float
-    device: str
-    seed: int
-    torch_threads: int = field(default=1)
-
-    def to_dict(self, history: bool = True) -> dict:
-        """Plain JSON-able dict (no predictions or indices; ``history`` optional)."""
-        out = {k: getattr(self, k) for k in (
-            "task", "model", "metric", "selection", "mode", "predicted", "best_epoch", "predicted_last_epoch",
-            "epochs", "predicted_validation_epoch", "validation_epoch", "n_train", "n_val", "n_test", "settings",
-            "preprocessing", "seconds", "device", "seed", "torch_threads")}
-        if history:
-            out["history"] = list(self.history)
-        return out
 
 
 def _check_inputs(histograms, targets, task, model, train_index, test_index):
