@@ -24,6 +24,21 @@ from nlosplan.tasks.training_types import Preprocessing, TrainConfig, TrainedMod
 __all__ = ["CHECKPOINT_FORMAT", "load_checkpoint", "save_checkpoint"]
 
 CHECKPOINT_FORMAT = "nlosplan.tasks.checkpoint/1"
+#: Layer names of the MLP and the 1D CNN before they took DENALI's (``fc1``, ``conv1``, ``bn1``, ...): files
+#: written then load through this renaming.
+_LEGACY_KEYS = {"mlp": {"net.1.": "fc1.", "net.4.": "fc2.", "net.7.": "fc3.", "net.10.": "fc4."},
+                "cnn1d": {"features.0.": "conv1.", "features.1.": "bn1.", "features.3.": "conv2.",
+                          "features.4.": "bn2.", "features.6.": "conv3.", "features.7.": "bn3."}}
+
+
+def _renamed(state: dict, model: str) -> dict:
+    """``state`` with the layer names of an older file of ``model`` renamed to today's."""
+    table = _LEGACY_KEYS.get(model, {})
+    out = {}
+    for key, value in state.items():
+        old = next((o for o in table if key.startswith(o)), None)
+        out[table[old] + key[len(old):] if old else key] = value
+    return out
 
 
 def save_checkpoint(path, trained) -> Path:
@@ -86,7 +101,7 @@ def load_checkpoint(path):
     spec = ModelSpec.from_dict(meta["spec"])
     net = model_from_spec(spec)
     try:
-        net.load_state_dict(payload["state_dict"], strict=True)
+        net.load_state_dict(_renamed(payload["state_dict"], spec.name), strict=True)
     except RuntimeError as exc:
         raise UserError(f"{path}: weights do not fit model {spec.name} ({str(exc).splitlines()[0]})") from None
     net.eval()

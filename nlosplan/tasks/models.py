@@ -49,6 +49,9 @@ def _scaled(n: int, width: float, minimum: int = 4) -> int:
 class MLP(nn.Module):
     """Four fully connected layers (512/256/128 x width, GELU, dropout), DENALI's ``SmallMLP``.
 
+    Layer names are DENALI's (``fc1`` .. ``fc4``, one ``dropout`` used after each of the first three), so
+    DENALI's ``SmallMLP`` state dicts load into a ``width=1`` model with ``strict=True``.
+
     Parameters
     ----------
     in_features : int
@@ -61,17 +64,18 @@ class MLP(nn.Module):
     def __init__(self, in_features: int, n_outputs: int, width: float = 1.0, dropout: float = 0.1):
         super().__init__()
         h1, h2, h3 = (_scaled(n, width) for n in (512, 256, 128))
-        self.net = nn.Sequential(
-            nn.Flatten(),
-            nn.Linear(in_features, h1), nn.GELU(), nn.Dropout(dropout),
-            nn.Linear(h1, h2), nn.GELU(), nn.Dropout(dropout),
-            nn.Linear(h2, h3), nn.GELU(), nn.Dropout(dropout),
-            nn.Linear(h3, n_outputs),
-        )
+        self.fc1 = nn.Linear(in_features, h1)
+        self.fc2 = nn.Linear(h1, h2)
+        self.fc3 = nn.Linear(h2, h3)
+        self.fc4 = nn.Linear(h3, n_outputs)
+        self.dropout = nn.Dropout(dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``(N, rows, cols, bins)`` -> ``(N, n_outputs)``."""
-        return self.net(x)
+        x = x.flatten(1)
+        for fc in (self.fc1, self.fc2, self.fc3):
+            x = self.dropout(nn.functional.gelu(fc(x)))
+        return self.fc4(x)
 
 
 class CNN1D(nn.Module):
@@ -79,6 +83,8 @@ class CNN1D(nn.Module):
 
     Channels 128 -> 128 -> 64 (x width), kernels 5/3/3, then global average
     pooling over time and a two-layer head (64 -> 32 -> outputs, x width).
+    Layer names are DENALI's (``conv1``, ``bn1`` .. ``conv3``, ``bn3``; ``head`` for the classifier), so
+    DENALI's state dicts load into a ``width=1`` model with ``strict=True``.
 
     Parameters
     ----------
@@ -87,23 +93,46 @@ class CNN1D(nn.Module):
     n_outputs : int
     width : float
     dropout : float
+    denali_regressor : bool
+        DENALI's regressor head (``MediumConv1DNetReg``) instead of ``head``: ``pool``, ``mlp`` (Linear,
+        GELU, Dropout), ``out_linear``, and ``out_tanh``, a layer DENALI's ``forward`` never uses but its
+        state dicts hold. The same function as ``head``; used by DENALI's recipe
+        (:mod:`nlosplan.tasks.denali_recipe`).
     """
 
-    def __init__(self, zones: int, n_outputs: int, width: float = 1.0, dropout: float = 0.1):
+    def __init__(self, zones: int, n_outputs: int, width: float = 1.0, dropout: float = 0.1,
+                 denali_regressor: bool = False):
         super().__init__()
         c1, c3 = _scaled(128, width), _scaled(64, width)
         head = _scaled(32, width)
-        self.features = nn.Sequential(
-            nn.Conv1d(zones, c1, kernel_size=5, padding=2, bias=False), nn.BatchNorm1d(c1), nn.GELU(),
-            nn.Conv1d(c1, c1, kernel_size=3, padding=1, bias=False), nn.BatchNorm1d(c1), nn.GELU(),
-            nn.Conv1d(c1, c3, kernel_size=3, padding=1, bias=False), nn.BatchNorm1d(c3), nn.GELU(),
-        )
-        self.head = nn.Sequential(nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Linear(c3, head), nn.GELU(),
-                                  nn.Dropout(dropout), nn.Linear(head, n_outputs))
+        self.conv1 = nn.Conv1d(zones, c1, kernel_size=5, padding=2, bias=False)
+        self.bn1 = nn.BatchNorm1d(c1)
+        self.conv2 = nn.Conv1d(c1, c1, kernel_size=3, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm1d(c1)
+        self.conv3 = nn.Conv1d(c1, c3, kernel_size=3, padding=1, bias=False)
+        self.bn3 = nn.BatchNorm1d(c3)
+        self.denali_regressor = bool(denali_regressor)
+        if self.denali_regressor:
+            self.pool = nn.AdaptiveAvgPool1d(1)
+            self.mlp = nn.Sequential(nn.Linear(c3, head), nn.GELU(), nn.Dropout(dropout))
+            self.out_linear = nn.Linear(head, n_outputs)
+            self.out_tanh = nn.Linear(head, n_outputs)
+        else:
+            self.head = nn.Sequential(nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Linear(c3, head), nn.GELU(),
+                                      nn.Dropout(dropout), nn.Linear(head, n_outputs))
+
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """``(N, rows, cols, bins)`` -> ``(N, rows*cols, bins)`` -> the third block's output ``(N, c3, bins)``."""
+        x = x.flatten(1, 2)
+        for conv, bn in ((self.conv1, self.bn1), (self.conv2, self.bn2), (self.conv3, self.bn3)):
+            x = nn.functional.gelu(bn(conv(x)))
+        return x
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(N, rows, cols, bins)`` -> ``(N, rows*cols, bins)`` -> ``(N, n_outputs)``."""
-        return self.head(self.features(x.flatten(1, 2)))
+        """``(N, rows, cols, bins)`` -> ``(N, n_outputs)``."""
+        if self.denali_regressor:
+            return self.out_linear(self.mlp(self.pool(self.features(x)).squeeze(-1)))
+        return self.head(self.features(x))
 
 
 class CNN3DDeep(nn.Module):

@@ -1,8 +1,8 @@
 """``nlosplan bench``: benchmarks that print figures.
 
 ``histogram`` and ``simulate`` (histogram formation, the fast simulator) are
-here; ``rig`` (:mod:`.rig`), ``live`` (:mod:`.live`) and ``fidelity``/``crossval`` (:mod:`.fidelity`)
-in their own modules.
+here; ``rig`` (:mod:`.rig`), ``live`` (:mod:`.live`), ``fidelity``/``crossval`` (:mod:`.fidelity`),
+``real`` (:mod:`.real`) and ``denali`` (:mod:`.denali`) in their own modules.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import argparse
 from typing import Sequence
 
 from nlosplan.cli.bench import fidelity as fidelity_bench, live as live_bench, real as real_bench, rig as rig_bench
+from nlosplan.cli.bench import denali as denali_bench
 
 from nlosplan.cli.selections import choice_list, object_list
 from nlosplan.cli.common import command_group, emit, int_type, number_type, progress_bar, sub_parser
@@ -203,6 +204,7 @@ def add(sub) -> None:
     fidelity_bench.add_bench(bsub)
     live_bench.add_bench(bsub)
     real_bench.add_bench(bsub)
+    denali_bench.add_bench(bsub)
 
 
 BENCH_SIMULATE_DESCRIPTION = """\

@@ -1,10 +1,13 @@
 """``nlosplan bench real``: every real-data check, printed against the targets of issue 16.
 
-Two checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
+Three checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
 distances, all zones, cross-validated by distance (``calibrate``'s all-zone
 model: each capture is predicted by the sensor file of a fit that did not see
 it); ``table2``, DENALI's Table 2 (the 3x3 rows and the ratios) from noisy
-simulated captures of the DENALI preset with DENALI's processing, nothing fitted.
+simulated captures of the DENALI preset with DENALI's processing, nothing fitted;
+``checkpoints``, DENALI's networks trained on real captures run on simulated ones
+(:func:`nlosplan.tasks.denali_bench.checkpoint_check`), with the breakdown of their
+stored real test predictions (:func:`nlosplan.tasks.denali_breakdown.real_breakdown`).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from nlosplan.errors import UserError
 
 DEFAULT_PLANE = "../shared/data/tmf882x_distance/distance_data_even.json"
 EXAMPLE = "nlosplan bench real --json"
+EXAMPLE_CHECKPOINTS = "nlosplan bench real --parts checkpoints --checkpoints denali/benchmark/main_table/checkpoints"
 
 
 def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=None) -> dict:
@@ -43,7 +47,22 @@ def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=Non
             "fold_seconds": [f["seconds"] for f in cv.fold_fits], "seconds": cv.seconds}
 
 
-PARTS = ("plane", "table2")
+PARTS = ("plane", "table2", "checkpoints")
+CHECKPOINTS_HINT = ("give --checkpoints DIR, DENALI's benchmark/main_table/checkpoints (github.com/NikhilBehari/"
+                    "denali), to run its real-trained networks on simulated captures")
+
+
+def run_checkpoints(folder, sensor: str, budget: str, checkpoints=None, progress=None) -> dict:
+    """The checkpoints part: DENALI's real-trained networks on simulated captures, and their real breakdown."""
+    from nlosplan.tasks.denali_bench import checkpoint_check
+    from nlosplan.tasks.denali_breakdown import real_breakdown
+    from nlosplan.tasks.denali_checkpoints import load_checkpoint_dir
+
+    if folder is None:
+        return {"checkpoints": [], "skipped": f"no --checkpoints given; {CHECKPOINTS_HINT}"}
+    cks = checkpoints if checkpoints is not None else load_checkpoint_dir(folder)
+    res = checkpoint_check(sensor, cks, budget=budget, progress=progress)
+    return {**res, "folder": str(folder), "sensor": sensor, "budget": budget, "real_breakdown": real_breakdown(cks)}
 
 
 def _check_plane(path) -> None:
@@ -79,6 +98,37 @@ def _parts(text: str) -> list[str]:
     return parts
 
 
+def _check_checkpoints(args):
+    """The checkpoints part's inputs, before any work: DENALI's four files (read, checked) and a 3x3 sensor."""
+    if args.checkpoints is None:
+        return None
+    from nlosplan.sensor_models import resolve_sensor
+    from nlosplan.tasks.denali_checkpoints import load_checkpoint_dir
+
+    cks = load_checkpoint_dir(args.checkpoints)   # small files: every refusal is one line
+    sensor = resolve_sensor(args.denali_sensor)
+    if (sensor.zones_rows, sensor.zones_cols, sensor.n_bins) != (3, 3, 128):
+        raise UserError(f"--denali-sensor {args.denali_sensor}: DENALI's networks take 3x3 zones and 128 bins")
+    return cks
+
+
+def _checkpoints_part(args, cks, out: dict, texts: list) -> None:
+    """Run the checkpoints part into ``out`` (``checkpoints``, ``real_breakdown``, ...) and ``texts``."""
+    from nlosplan.cli.bench.denali import checkpoints_text
+
+    with progress_bar(args, None, "bench real", "step") as bar:
+        ck = run_checkpoints(args.checkpoints, args.denali_sensor, args.checkpoint_budget, cks,
+                             progress=None if args.checkpoints is None else bar)
+    out["checkpoints"] = ck.pop("checkpoints")
+    if ck.get("skipped"):
+        out["checkpoints_skipped"] = ck["skipped"]
+    else:
+        out["real_breakdown"] = ck.pop("real_breakdown")
+        out["checkpoints_run"] = ck
+    texts.append(checkpoints_text({"checkpoints": out["checkpoints"], **ck,
+                                   "real_breakdown": out.get("real_breakdown")}))
+
+
 def _cmd(args) -> int:
     from nlosplan.calibration.stats_file import load_stats
     from nlosplan.reports.realism_table import format_plane_table, format_table2
@@ -88,6 +138,7 @@ def _cmd(args) -> int:
         _check_plane(args.plane)
     if "table2" in parts:
         load_stats(args.stats)   # a small file, read again by the part: its errors are one line before any work
+    cks = _check_checkpoints(args) if "checkpoints" in parts else None
     out, texts = {}, []
     if "table2" in parts:
         t2 = run_table2(args.stats, args.denali_sensor, args.positions)
@@ -95,6 +146,8 @@ def _cmd(args) -> int:
         texts.append(format_table2({**t2, "rows": [dict(r, zones="3x3") for r in t2["rows"]]},
                                    title=f"DENALI Table 2 ({t2['data']}), {t2['sensor']} with {t2['scene_source']}, "
                                          f"noisy simulated captures, DENALI's processing ({t2['seconds']:.0f} s):"))
+    if "checkpoints" in parts:
+        _checkpoints_part(args, cks, out, texts)
     if "plane" not in parts:
         emit(args, out, "\n\n".join(texts))
         return 0
@@ -113,7 +166,8 @@ def _cmd(args) -> int:
 
 def add_bench(bsub) -> None:
     """``nlosplan bench real``."""
-    p = bsub.add_parser("real", help="realism against real data: plane captures held out by distance; DENALI Table 2",
+    p = bsub.add_parser("real", help="realism against real data: plane captures held out by distance; DENALI Table 2; DENALI's "
+                             "real-trained networks",
                         description="Every real-data check the project ships, against the targets of issue 16. "
                                     "Plane captures at known distances (tmf882x_distance): the all-zone model of "
                                     "'nlosplan calibrate' cross-validated by distance, per zone: sub-bin peak error "
@@ -125,17 +179,39 @@ def add_bench(bsub) -> None:
                                     "\"spread\", \"skew\", \"real\": {...}}...], \"ratios\": {...}}}. Table 2: DENALI's "
                                     "3x3 rows from noisy simulated captures of the DENALI preset (centroid within 1 "
                                     "bin, spread within 15 %, total within 20 %, skew sign; ratios within 20 %); "
-                                    "about 1 min (the fast simulator's 1,300 scenes).",
-                        epilog=f"example:\n  {EXAMPLE}", formatter_class=argparse.RawDescriptionHelpFormatter)
+                                    "about 1 min (the fast simulator's 1,300 scenes). Checkpoints (--checkpoints "
+                                    "DIR, else skipped): DENALI's four networks trained on real captures (1D CNN "
+                                    "loc/shape/size, shape MLP) run on DENALI's protocol simulated for "
+                                    "--denali-sensor, their scores beside their real test scores, and per "
+                                    "BatchNorm layer of the 1D CNNs the distance of its simulated input from the "
+                                    "real running statistics (median |z| of the channel means, mean and rms "
+                                    "log-ratio of the variances); plus their stored REAL test predictions broken "
+                                    "down by lighting, size, near/far half, quadrant and capture folder. Quick "
+                                    "budget: 36 min on a shared 2-core machine under load, 29 of them simulating "
+                                    "the 7,200 captures (cached for the next run). JSON adds "
+                                    "\"checkpoints\": [{\"name\", \"task\", \"metric\", \"simulated\", "
+                                    "\"real\", \"bn\": {\"bn1\": {\"median_abs_z\", \"mean_log_var_ratio\", "
+                                    "\"rms_log_var_ratio\", ...}...}}...], \"real_breakdown\": {...}.",
+                        epilog=f"examples:\n  {EXAMPLE}\n  {EXAMPLE_CHECKPOINTS}",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--plane", default=DEFAULT_PLANE, help="plane captures JSON (default: %(default)s)")
     p.add_argument("--sensor", default="tmf8828-3x3-short", help="sensor to calibrate (default: %(default)s)")
     p.add_argument("--folds", type=int_type(2, 100), default=5, help="folds by distance (default: %(default)s)")
     p.add_argument("--min-distance", type=number_type(float, zero_ok=True), default=0.06, help="nearest capture scored, m (default: 0.06)")
-    p.add_argument("--parts", default="plane,table2", help="checks to run, from plane, table2 (default: %(default)s)")
+    p.add_argument("--parts", default="plane,table2,checkpoints",
+                   help="checks to run, from plane, table2, checkpoints (default: %(default)s)")
     p.add_argument("--stats", default="denali-table2",
                    help="table2: statistics file (default: %(default)s, the shipped DENALI Table 2)")
     p.add_argument("--denali-sensor", default="denali-tmf8828-3x3",
-                   help="table2: sensor preset or file scored, with its scene table (default: %(default)s)")
+                   help="table2 and checkpoints: sensor preset or file scored, with its scene table (default: "
+                        "%(default)s)")
+    p.add_argument("--checkpoints", default=None, metavar="DIR",
+                   help="checkpoints: DENALI's benchmark/main_table/checkpoints (reg_1dcnn, obj_1dcnn, size_1dcnn, "
+                        "obj_mlp .pth; read without unpickling code); without it the part is skipped")
+    p.add_argument("--checkpoint-budget", default="quick", choices=["quick", "full"],
+                   help="checkpoints: quick = 7,200 simulated captures (every fifth position), each network scored "
+                        "on all; full = DENALI's 36,000, each scored on its real test split's scenes (default: "
+                        "%(default)s; the captures are cached and shared with 'bench denali')")
     p.add_argument("--positions", type=int_type(1, 100), default=10,
                    help="table2: gantry positions per object (30 objects), the Monte-Carlo sample (default: 10; "
                         "the shipped scores used 10)")
