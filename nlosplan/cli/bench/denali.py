@@ -122,7 +122,7 @@ def _cmd(args) -> int:
 
 def add_bench(bsub) -> None:
     """``nlosplan bench denali``."""
-    from nlosplan.cli.dataset import _objects, _positions
+    from nlosplan.cli.selections import object_list, position_list
     from nlosplan.simulators.presets.scene_model import DEFAULT_SENSOR
     from nlosplan.tasks.names import TASKS
 
@@ -147,9 +147,9 @@ def add_bench(bsub) -> None:
                    help="loc, shape, size (default: all three)")
     p.add_argument("--no-validation", action="store_true",
                    help="skip the second training per cell that gives the validation-chosen epoch (halves the time)")
-    p.add_argument("--objects", type=_objects, default=None, metavar="A,S,...",
+    p.add_argument("--objects", type=object_list, default=None, metavar="A,S,...",
                    help="only these objects (DENALI objects or class groups; budget becomes custom)")
-    p.add_argument("--positions", type=_positions, default=None, metavar="0-99",
+    p.add_argument("--positions", type=position_list, default=None, metavar="0-99",
                    help="only these gantry positions (budget becomes custom)")
     p.add_argument("--epochs", type=int_type(1, 10000), default=None, metavar="N",
                    help="epochs for every cell instead of DENALI's (budget becomes custom)")
