@@ -54,6 +54,10 @@ SOURCE = "sim:fast"
 
 Progress = Callable[[int, int, str], None]
 
+#: Scenes in one simulation at most (memory: each scene holds its objects' surface samples): the objects and
+#: lightings of a run of positions share one, as many objects as fit.
+SCENES_PER_SIMULATION = 1200
+
 
 def scene_seed(seed: int, obj: str, size: str, position: int, lights: str) -> int:
     """The noise seed of one scene, from the build seed and its labels alone (0 to 2**63 - 1)."""
@@ -209,43 +213,58 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
 
     # one build of these captures at a time: an identical build started meanwhile stops at once, before simulating
     identity = json.dumps([h, int(seed), variant, objects, sizes, positions, lights, int(repeats), batch])
+    groups = [(obj, size, light) for obj in objects for size in sizes for light in lights]
+    keys = {g: {(p, r): capture_key(labels(*g, p, r), h) for p in positions for r in range(repeats)} for g in groups}
+    complete = {g for g in groups if all(k in stored for k in keys[g].values())}
+    groups_skipped = len(complete)
+    meshes = [(obj, size) for obj in objects for size in sizes]
+    plan = None  # the last simulation's plan: the next one is padded to it (one compiled program for the build)
+    n_sims = n_scenes = 0
     with store.writer(f"dataset build #{hashlib.sha256(identity.encode()).hexdigest()[:12]}"):
-        for obj in objects:
-            for size in sizes:
-                for light in lights:
-                    group = f"{obj}_{size} lights {light}"
-                    keys = {(p, r): capture_key(labels(obj, size, light, p, r), h)
-                            for p in positions for r in range(repeats)}
-                    if all(k in stored for k in keys.values()):
-                        groups_skipped += 1
-                        skipped += len(keys)
-                        done += len(keys)
-                        if progress:
-                            progress(done, total, f"{group}: stored already")
-                        continue
-                    for chunk in batches:
+        for chunk in batches:
+            per_sim = max(1, SCENES_PER_SIMULATION // (len(chunk) * len(lights)))
+            for m0 in range(0, len(meshes), per_sim):
+                todo = []  # (group, missing (p, r)) of the meshes of this simulation
+                for obj, size in meshes[m0: m0 + per_sim]:
+                    for light in lights:
+                        g = (obj, size, light)
                         # stored meanwhile by another build (a concurrent one with other objects or positions) counts
-                        missing = [(p, r) for p in chunk for r in range(repeats)
-                                   if keys[(p, r)] not in stored and not store.has(keys[(p, r)])]
+                        missing = [] if g in complete else [
+                            (p, r) for p in chunk for r in range(repeats)
+                            if keys[g][(p, r)] not in stored and not store.has(keys[g][(p, r)])]
                         skipped += len(chunk) * repeats - len(missing)
+                        done += len(chunk) * repeats - len(missing)
                         if missing:
-                            t0 = time.perf_counter()
-                            scenes = [denali_scene(obj, size, p, light, **options) for p in chunk]
-                            sim = expected_batch(scenes, sensor, fidelity=knobs)
-                            messages += [w for w in sim.warnings if w not in messages]
-                            seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
-                            counts = draw_captures(sim.expected, seeds, repeats, sensor)
-                            t1 = time.perf_counter()
-                            index = {p: i for i, p in enumerate(chunk)}
-                            items = [(counts[index[p], r], labels(obj, size, light, p, r),
-                                      {"scene_meta": scenes[index[p]].meta, "scene_seed": seeds[index[p]],
-                                       "fidelity_knobs": knobs, "simulator": sim_meta})
-                                     for p, r in missing]
-                            added += store.put_many(items, sensor=sensor).added
-                            t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
-                        done += len(chunk) * repeats
-                        if progress:
-                            progress(done, total, f"{group}: positions {chunk[0]}-{chunk[-1]}")
+                            todo.append((g, missing))
+                if not todo:
+                    if progress:
+                        progress(done, total, f"positions {chunk[0]}-{chunk[-1]}: stored already")
+                    continue
+                t0 = time.perf_counter()
+                # every lighting and object of these positions in one simulation: an object's light is the same
+                # under both lightings and the mount's the same under every object, so each is computed once
+                scenes = [denali_scene(obj, size, p, light, **options) for (obj, size, light), _ in todo for p in chunk]
+                sim = expected_batch(scenes, sensor, fidelity=knobs, pad_to=plan)
+                plan = sim.plan
+                n_sims, n_scenes = n_sims + 1, n_scenes + len(scenes)
+                messages += [w for w in sim.warnings if w not in messages]
+                t_sim += time.perf_counter() - t0
+                for i, ((obj, size, light), missing) in enumerate(todo):
+                    t0 = time.perf_counter()
+                    seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
+                    rows = slice(i * len(chunk), (i + 1) * len(chunk))
+                    counts = draw_captures(sim.expected[rows], seeds, repeats, sensor)
+                    t1 = time.perf_counter()
+                    index = {p: j for j, p in enumerate(chunk)}
+                    items = [(counts[index[p], r], labels(obj, size, light, p, r),
+                              {"scene_meta": scenes[rows][index[p]].meta, "scene_seed": seeds[index[p]],
+                               "fidelity_knobs": knobs, "simulator": sim_meta})
+                             for p, r in missing]
+                    added += store.put_many(items, sensor=sensor).added
+                    t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
+                    done += len(missing)
+                    if progress:
+                        progress(done, total, f"{obj}_{size} lights {light}: positions {chunk[0]}-{chunk[-1]}")
     for m in messages:
         warnings.warn(m, NLOSWarning, stacklevel=2)
     seconds = time.perf_counter() - t_start
@@ -254,5 +273,6 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
             "fidelity": knobs, "seed": int(seed), "variant": variant, "scene_options": options,
             "groups": len(objects) * len(sizes) * len(lights), "groups_skipped": groups_skipped,
             "captures_total": total, "captures_added": added, "captures_skipped": skipped, "seconds": seconds,
-            "simulate_seconds": t_sim, "store_seconds": t_store,
+            "simulate_seconds": t_sim, "store_seconds": t_store, "simulations": n_sims, "scenes_simulated": n_scenes,
+            "scenes_per_second": n_scenes / t_sim if t_sim > 0 else 0.0,
             "captures_per_second": added / seconds if seconds > 0 else 0.0, "warnings": messages}
