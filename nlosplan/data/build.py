@@ -1,27 +1,36 @@
 """Simulated DENALI datasets: batches of scenes through the fast simulator, Poisson captures, into a store.
 
-Each (object, size, lights) group is simulated in batches of gantry positions
-through the fast backend's batch seam (:func:`~nlosplan.simulators.expected_batch`: one
-compiled program per batch shape, shared between groups); each scene then
-gets ``repeats`` Poisson captures drawn with its own seed, derived from
-``(seed, object, size, position, lights)`` alone. Every capture is committed
-on its own (:meth:`~nlosplan.data.store.CaptureStore.put_many`), so an
-interrupted build keeps what it stored, and a rerun with the same arguments
-skips complete groups and batches and gives the same counts.
+The positions are cut into runs of ``batch``; for each run, every requested
+object, size and lighting (as many as :data:`SCENES_PER_SIMULATION` allows)
+is simulated in ONE call of the fast backend's batch seam
+(:func:`~nlosplan.simulators.expected_batch`): an object's light is the same
+under both lightings and the gantry's mount the same under every object at a
+position, so the simulator computes each once (its shared terms), and each
+simulation is padded to the previous one's plan (``pad_to``), so the build
+compiles one program. Each scene then gets ``repeats`` Poisson captures drawn
+with its own seed, derived from ``(seed, object, size, position, lights)``
+alone. Every capture is committed on its own
+(:meth:`~nlosplan.data.store.CaptureStore.put_many`), so an interrupted build
+keeps what it stored, and a rerun with the same arguments skips what is
+stored and gives the same counts.
 
-Speed: 3x3 zones, ``fidelity="default"``, 100 positions per batch, on a
-shared 2-core CPU VM: 115-190 captures/s (3 repeats per scene), JAX
-compilation of each new plan shape included; simulation takes ~95 % of it,
-the store (``synchronous="NORMAL"``) ~3 %.
+Speed (issue 38, default model ``denali-tmf8828-3x3``: mixed reflectance and
+the mount; ``--objects A,S,O,plus,7 --lights on,off --repeats 3``, 6,000
+captures, cold, a 2-core VM shared with other jobs at load 8-9): 94 s, 64
+captures/s, against the one-group-at-a-time build of before in the same
+session (see ``docs/tasks.md`` for the ratio).
 
 Determinism
 -----------
-A batch's expected counts depend (by float32 rounding, ~1e-7 relative) on the
-batch's composition, so batches are fixed by the arguments: the sorted
-positions cut into runs of ``batch``. A batch with any capture missing is
-simulated whole and only the missing captures are stored. Rerun with other
-``positions`` or ``batch``, a rare count may differ from a fresh build's (same
-noise seeds, means that differ in float32 rounding).
+A scene's expected counts depend (by float32 rounding, ~1e-7 relative) on
+the simulation it ran in, so simulations are fixed by the arguments: the
+sorted positions cut into runs of ``batch``, with the objects and lightings
+in the given order. The counts equal those of each group simulated alone (a
+test compares them capture by capture). A run with any capture missing is
+simulated for its missing groups and only the missing captures are stored.
+Rerun with other ``positions``, ``objects`` or ``batch``, a rare count may
+differ from a fresh build's (same noise seeds, means that differ in float32
+rounding).
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ from nlosplan.simulators.scene import NLOSWarning
 from nlosplan.data.denali_io import OBJECT_ALIASES
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
-__all__ = ["SCENES", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
+__all__ = ["SCENES", "SCENES_PER_SIMULATION", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
 
 #: Scenes a dataset can be built from.
 SCENES = ("denali",)
@@ -154,16 +163,19 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
         Further :func:`~nlosplan.simulators.denali_scene` keywords (``albedo``,
         ``lobe_fwhm_deg``, ``mount``, ``wall_albedo``, ``table_albedo``, ``tables``).
     progress : callable, optional
-        ``progress(done, total, text)`` after each group or batch, in captures.
+        ``progress(done, total, text)`` after each group of each run of positions, in captures.
     batch : int
-        Scenes per simulator (memory bound; fixes the batches, see the module notes).
+        Positions per run (fixes the simulations, see the module notes); a simulation holds at most
+        :data:`SCENES_PER_SIMULATION` scenes (memory).
 
     Returns
     -------
     dict
         ``captures_total``, ``captures_added``, ``captures_skipped`` (stored
         before), ``groups``, ``groups_skipped``, ``seconds``, ``simulate_seconds``,
-        ``store_seconds``, ``captures_per_second`` (added / seconds), the
+        ``store_seconds``, ``captures_per_second`` (added / seconds), ``simulations`` and
+        ``scenes_simulated`` (simulator calls and their scenes), ``scenes_per_second`` (simulated
+        scenes / ``simulate_seconds``, scene construction and Poisson draws included), the
         sensor, its hash and zones, ``fidelity`` knobs, ``seed``, ``variant``
         and the simulator ``warnings``.
 
