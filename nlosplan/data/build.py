@@ -1,27 +1,36 @@
 """Simulated DENALI datasets: batches of scenes through the fast simulator, Poisson captures, into a store.
 
-Each (object, size, lights) group is simulated in batches of gantry positions
-through the fast backend's batch seam (:func:`~nlosplan.simulators.expected_batch`: one
-compiled program per batch shape, shared between groups); each scene then
-gets ``repeats`` Poisson captures drawn with its own seed, derived from
-``(seed, object, size, position, lights)`` alone. Every capture is committed
-on its own (:meth:`~nlosplan.data.store.CaptureStore.put_many`), so an
-interrupted build keeps what it stored, and a rerun with the same arguments
-skips complete groups and batches and gives the same counts.
+The positions are cut into runs of ``batch``; for each run, every requested
+object, size and lighting (as many as :data:`SCENES_PER_SIMULATION` allows)
+is simulated in ONE call of the fast backend's batch seam
+(:func:`~nlosplan.simulators.expected_batch`): an object's light is the same
+under both lightings and the gantry's mount the same under every object at a
+position, so the simulator computes each once (its shared terms), and each
+simulation is padded to the previous one's plan (``pad_to``), so the build
+compiles one program. Each scene then gets ``repeats`` Poisson captures drawn
+with its own seed, derived from ``(seed, object, size, position, lights)``
+alone. Every capture is committed on its own
+(:meth:`~nlosplan.data.store.CaptureStore.put_many`), so an interrupted build
+keeps what it stored, and a rerun with the same arguments skips what is
+stored and gives the same counts.
 
-Speed: 3x3 zones, ``fidelity="default"``, 100 positions per batch, on a
-shared 2-core CPU VM: 115-190 captures/s (3 repeats per scene), JAX
-compilation of each new plan shape included; simulation takes ~95 % of it,
-the store (``synchronous="NORMAL"``) ~3 %.
+Speed (issue 38, default model ``denali-tmf8828-3x3``: mixed reflectance and
+the mount; ``--objects A,S,O,plus,7 --lights on,off --repeats 3``, 6,000
+captures, cold, a 2-core VM shared with other jobs at load 8-9): 94 s, 64
+captures/s, against the one-group-at-a-time build of before in the same
+session (see ``docs/tasks.md`` for the ratio).
 
 Determinism
 -----------
-A batch's expected counts depend (by float32 rounding, ~1e-7 relative) on the
-batch's composition, so batches are fixed by the arguments: the sorted
-positions cut into runs of ``batch``. A batch with any capture missing is
-simulated whole and only the missing captures are stored. Rerun with other
-``positions`` or ``batch``, a rare count may differ from a fresh build's (same
-noise seeds, means that differ in float32 rounding).
+A scene's expected counts depend (by float32 rounding, ~1e-7 relative) on
+the simulation it ran in, so simulations are fixed by the arguments: the
+sorted positions cut into runs of ``batch``, with the objects and lightings
+in the given order. The counts equal those of each group simulated alone (a
+test compares them capture by capture). A run with any capture missing is
+simulated for its missing groups and only the missing captures are stored.
+Rerun with other ``positions``, ``objects`` or ``batch``, a rare count may
+differ from a fresh build's (same noise seeds, means that differ in float32
+rounding).
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ from nlosplan.simulators.scene import NLOSWarning
 from nlosplan.data.denali_io import OBJECT_ALIASES
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
-__all__ = ["SCENES", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
+__all__ = ["SCENES", "SCENES_PER_SIMULATION", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
 
 #: Scenes a dataset can be built from.
 SCENES = ("denali",)
@@ -53,6 +62,10 @@ SCENES = ("denali",)
 SOURCE = "sim:fast"
 
 Progress = Callable[[int, int, str], None]
+
+#: Scenes in one simulation at most (memory: each scene holds its objects' surface samples): the objects and
+#: lightings of a run of positions share one, as many objects as fit.
+SCENES_PER_SIMULATION = 1200
 
 
 def scene_seed(seed: int, obj: str, size: str, position: int, lights: str) -> int:
@@ -150,16 +163,19 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
         Further :func:`~nlosplan.simulators.denali_scene` keywords (``albedo``,
         ``lobe_fwhm_deg``, ``mount``, ``wall_albedo``, ``table_albedo``, ``tables``).
     progress : callable, optional
-        ``progress(done, total, text)`` after each group or batch, in captures.
+        ``progress(done, total, text)`` after each group of each run of positions, in captures.
     batch : int
-        Scenes per simulator (memory bound; fixes the batches, see the module notes).
+        Positions per run (fixes the simulations, see the module notes); a simulation holds at most
+        :data:`SCENES_PER_SIMULATION` scenes (memory).
 
     Returns
     -------
     dict
         ``captures_total``, ``captures_added``, ``captures_skipped`` (stored
         before), ``groups``, ``groups_skipped``, ``seconds``, ``simulate_seconds``,
-        ``store_seconds``, ``captures_per_second`` (added / seconds), the
+        ``store_seconds``, ``captures_per_second`` (added / seconds), ``simulations`` and
+        ``scenes_simulated`` (simulator calls and their scenes), ``scenes_per_second`` (simulated
+        scenes / ``simulate_seconds``, scene construction and Poisson draws included), the
         sensor, its hash and zones, ``fidelity`` knobs, ``seed``, ``variant``
         and the simulator ``warnings``.
 
@@ -209,43 +225,58 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
 
     # one build of these captures at a time: an identical build started meanwhile stops at once, before simulating
     identity = json.dumps([h, int(seed), variant, objects, sizes, positions, lights, int(repeats), batch])
+    groups = [(obj, size, light) for obj in objects for size in sizes for light in lights]
+    keys = {g: {(p, r): capture_key(labels(*g, p, r), h) for p in positions for r in range(repeats)} for g in groups}
+    complete = {g for g in groups if all(k in stored for k in keys[g].values())}
+    groups_skipped = len(complete)
+    meshes = [(obj, size) for obj in objects for size in sizes]
+    plan = None  # the last simulation's plan: the next one is padded to it (one compiled program for the build)
+    n_sims = n_scenes = 0
     with store.writer(f"dataset build #{hashlib.sha256(identity.encode()).hexdigest()[:12]}"):
-        for obj in objects:
-            for size in sizes:
-                for light in lights:
-                    group = f"{obj}_{size} lights {light}"
-                    keys = {(p, r): capture_key(labels(obj, size, light, p, r), h)
-                            for p in positions for r in range(repeats)}
-                    if all(k in stored for k in keys.values()):
-                        groups_skipped += 1
-                        skipped += len(keys)
-                        done += len(keys)
-                        if progress:
-                            progress(done, total, f"{group}: stored already")
-                        continue
-                    for chunk in batches:
+        for chunk in batches:
+            per_sim = max(1, SCENES_PER_SIMULATION // (len(chunk) * len(lights)))
+            for m0 in range(0, len(meshes), per_sim):
+                todo = []  # (group, missing (p, r)) of the meshes of this simulation
+                for obj, size in meshes[m0: m0 + per_sim]:
+                    for light in lights:
+                        g = (obj, size, light)
                         # stored meanwhile by another build (a concurrent one with other objects or positions) counts
-                        missing = [(p, r) for p in chunk for r in range(repeats)
-                                   if keys[(p, r)] not in stored and not store.has(keys[(p, r)])]
+                        missing = [] if g in complete else [
+                            (p, r) for p in chunk for r in range(repeats)
+                            if keys[g][(p, r)] not in stored and not store.has(keys[g][(p, r)])]
                         skipped += len(chunk) * repeats - len(missing)
+                        done += len(chunk) * repeats - len(missing)
                         if missing:
-                            t0 = time.perf_counter()
-                            scenes = [denali_scene(obj, size, p, light, **options) for p in chunk]
-                            sim = expected_batch(scenes, sensor, fidelity=knobs)
-                            messages += [w for w in sim.warnings if w not in messages]
-                            seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
-                            counts = draw_captures(sim.expected, seeds, repeats, sensor)
-                            t1 = time.perf_counter()
-                            index = {p: i for i, p in enumerate(chunk)}
-                            items = [(counts[index[p], r], labels(obj, size, light, p, r),
-                                      {"scene_meta": scenes[index[p]].meta, "scene_seed": seeds[index[p]],
-                                       "fidelity_knobs": knobs, "simulator": sim_meta})
-                                     for p, r in missing]
-                            added += store.put_many(items, sensor=sensor).added
-                            t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
-                        done += len(chunk) * repeats
-                        if progress:
-                            progress(done, total, f"{group}: positions {chunk[0]}-{chunk[-1]}")
+                            todo.append((g, missing))
+                if not todo:
+                    if progress:
+                        progress(done, total, f"positions {chunk[0]}-{chunk[-1]}: stored already")
+                    continue
+                t0 = time.perf_counter()
+                # every lighting and object of these positions in one simulation: an object's light is the same
+                # under both lightings and the mount's the same under every object, so each is computed once
+                scenes = [denali_scene(obj, size, p, light, **options) for (obj, size, light), _ in todo for p in chunk]
+                sim = expected_batch(scenes, sensor, fidelity=knobs, pad_to=plan)
+                plan = sim.plan
+                n_sims, n_scenes = n_sims + 1, n_scenes + len(scenes)
+                messages += [w for w in sim.warnings if w not in messages]
+                t_sim += time.perf_counter() - t0
+                for i, ((obj, size, light), missing) in enumerate(todo):
+                    t0 = time.perf_counter()
+                    seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
+                    rows = slice(i * len(chunk), (i + 1) * len(chunk))
+                    counts = draw_captures(sim.expected[rows], seeds, repeats, sensor)
+                    t1 = time.perf_counter()
+                    index = {p: j for j, p in enumerate(chunk)}
+                    items = [(counts[index[p], r], labels(obj, size, light, p, r),
+                              {"scene_meta": scenes[rows][index[p]].meta, "scene_seed": seeds[index[p]],
+                               "fidelity_knobs": knobs, "simulator": sim_meta})
+                             for p, r in missing]
+                    added += store.put_many(items, sensor=sensor).added
+                    t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
+                    done += len(missing)
+                    if progress:
+                        progress(done, total, f"{obj}_{size} lights {light}: positions {chunk[0]}-{chunk[-1]}")
     for m in messages:
         warnings.warn(m, NLOSWarning, stacklevel=2)
     seconds = time.perf_counter() - t_start
@@ -254,5 +285,6 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
             "fidelity": knobs, "seed": int(seed), "variant": variant, "scene_options": options,
             "groups": len(objects) * len(sizes) * len(lights), "groups_skipped": groups_skipped,
             "captures_total": total, "captures_added": added, "captures_skipped": skipped, "seconds": seconds,
-            "simulate_seconds": t_sim, "store_seconds": t_store,
+            "simulate_seconds": t_sim, "store_seconds": t_store, "simulations": n_sims, "scenes_simulated": n_scenes,
+            "scenes_per_second": n_scenes / t_sim if t_sim > 0 else 0.0,
             "captures_per_second": added / seconds if seconds > 0 else 0.0, "warnings": messages}

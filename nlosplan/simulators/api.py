@@ -168,7 +168,7 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
 
 def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidelity="default", zones=None,
                    dtype="float32", prune: bool = True, parts: bool = False, chunk: int | None = None,
-                   progress=None) -> BatchResult:
+                   progress=None, pad_to: SimPlan | None = None) -> BatchResult:
     """Expected counts of a batch of scenes under one sensor.
 
     The fast backend runs the whole list through one simulator: scenes that share the rig and the objects'
@@ -188,6 +188,9 @@ def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidel
         Scenes per compiled call (memory; the fast backend's default 25).
     progress : callable, optional
         ``progress(scenes_done, scenes)`` as the batch runs.
+    pad_to : SimPlan, optional
+        Fast backend: the ``plan`` of a batch run before; this batch's sizes are padded to it where smaller, so a
+        sweep of batches (objects, positions) runs one compiled program (results equal within float32 rounding).
 
     Returns
     -------
@@ -197,8 +200,12 @@ def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidel
     """
     scenes = _scene_list(scenes)
     _check_sensor(sensor)
+    if pad_to is not None and check_backend(backend) != "fast":
+        raise UserError(f"pad_to is a fast-backend plan; backend {backend!r} has none")
+    extra = {} if pad_to is None else {"pad_to": pad_to}
     return BACKENDS[check_backend(backend)].expected_batch(scenes, sensor, fidelity=fidelity, zones=zones, dtype=dtype,
-                                                           prune=prune, parts=parts, chunk=chunk, progress=progress)
+                                                           prune=prune, parts=parts, chunk=chunk, progress=progress,
+                                                           **extra)
 
 
 def _check_nuisance(nuisance) -> tuple[str, ...]:

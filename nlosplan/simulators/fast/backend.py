@@ -49,9 +49,9 @@ class FastBackend:
                                plan=sim.plan, t0=t0, meta=dict(scene.meta))
 
     def expected_batch(self, scenes, sensor, *, fidelity="default", zones=None, dtype="float32", prune: bool = True,
-                       parts: bool = False, chunk: int | None = None, progress=None) -> BatchResult:
+                       parts: bool = False, chunk: int | None = None, progress=None, pad_to=None) -> BatchResult:
         """One :class:`FastSimulator` of the whole list (its compiled batches, shared terms and threads)."""
-        kw = {} if chunk is None else {"chunk": chunk}
+        kw = {"pad_to": pad_to} if chunk is None else {"chunk": chunk, "pad_to": pad_to}
         sim = FastSimulator(list(scenes), sensor, fidelity=fidelity, zones=zones, dtype=dtype, prune=prune, **kw)
         out = sim.expected(parts=parts, progress=progress)
         if parts:

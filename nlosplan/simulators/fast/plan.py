@@ -457,3 +457,75 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
                    object_mesh_index=tuple(o.mesh_index for o in obj_plans),
                    object_near_index=tuple(o.near_index for o in obj_plans))
 
+
+
+#: The sizes of an object term that :func:`pad_plan` may raise (each only adds weightless nodes, cells or samples).
+_GROWABLE = ("near1", "near2", "n1", "n2", "n_r")
+
+
+def _sample_count(plan: SimPlan, k: int) -> int:
+    return len(plan.object_samples[k][0][0]) if plan.object_samples[k] else 0
+
+
+def pad_plan(plan: SimPlan, like: SimPlan | None) -> SimPlan:
+    """``plan`` with its object terms' sizes raised to ``like``'s where larger, so both run one compiled program.
+
+    Plans of one rig and sensor differ, from batch to batch (e.g. one DENALI object after another), only in a
+    few sizes of their object terms: the near-wall blocks, the time ranges of the legs (``n1``, ``n2``,
+    ``n_r``) and the surface samples. Each is padded with exactly nothing: near blocks with the out-of-range
+    cell index, samples with zero area, time ranges with nodes beyond the arrivals (the legs' convolution
+    stays linear: ``fft_len = n1 + n2``). The result equals ``plan``'s within float32 rounding.
+
+    Parameters
+    ----------
+    plan : SimPlan
+    like : SimPlan or None
+        A plan compiled before (None, or a plan of another structure: ``plan`` unchanged).
+
+    Returns
+    -------
+    SimPlan
+        Same static structure as ``like`` when every size of ``plan`` is at most ``like``'s.
+    """
+    if like is None or len(plan.static.objects) != len(like.static.objects):
+        return plan
+    a, b = plan.static, like.static
+    same_rest = all(getattr(a, f.name) == getattr(b, f.name) for f in dataclasses.fields(PlanStatic)
+                    if f.name not in ("objects", "deposit"))
+    shapes = jax_shapes(plan.arrays) == jax_shapes(like.arrays)
+    if not (same_rest and shapes and all(
+            (x.kind, x.lobe, x.n_rows) == (y.kind, y.lobe, y.n_rows) for x, y in zip(a.objects, b.objects))):
+        return plan
+    objects, samples, near_index = [], [], []
+    for k, (x, y) in enumerate(zip(a.objects, b.objects)):
+        grown = {f: max(getattr(x, f), getattr(y, f)) for f in _GROWABLE}
+        if x.kind == "lambertian":
+            grown["fft_len"] = grown["n1"] + grown["n2"]
+        objects.append(dataclasses.replace(x, **grown))
+        size = max(_sample_count(plan, k), _sample_count(like, k))
+        samples.append([_pad_samples(s, size) for s in plan.object_samples[k]])
+        near = {}
+        for leg, idx in plan.object_near_index[k].items():
+            n_cells = plan.arrays["objects"][k][f"c{leg}t"].shape[1]
+            block = grown[f"near{leg}"]
+            near[leg] = [np.concatenate([i, np.full(block - len(i), n_cells, np.int64)]) for i in idx]
+        near_index.append(near)
+    static = dataclasses.replace(a, objects=tuple(objects))
+    return dataclasses.replace(plan, static=static, object_samples=tuple(samples), object_near_index=tuple(near_index))
+
+
+def _pad_samples(s: tuple, size: int) -> tuple:
+    """Surface samples ``(points, normals, areas)`` padded to ``size`` with zero-area copies of the last one."""
+    pts, nrm, area = s[:3]
+    pad = size - len(pts)
+    if pad <= 0:
+        return s
+    return (np.concatenate([pts, np.repeat(pts[-1:], pad, 0)]), np.concatenate([nrm, np.repeat(nrm[-1:], pad, 0)]),
+            np.concatenate([area, np.zeros(pad)])) + tuple(s[3:])
+
+
+def jax_shapes(tree) -> list:
+    """The shapes of a tree's array leaves, in order (the part of a compiled program's key that is not static)."""
+    from nlosplan._jax import jax
+
+    return [np.shape(x) for x in jax.tree_util.tree_leaves(tree)]

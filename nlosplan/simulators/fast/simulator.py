@@ -17,7 +17,7 @@ from nlosplan.errors import UserError
 from nlosplan.resources import default_threads
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.noise import CaptureNoise
-from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan
+from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan, pad_plan
 from nlosplan.sensor_models.transient import DEPOSIT_METHODS, default_deposit, deposit_method
 from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms
 from nlosplan.simulators.scene import Scene
@@ -175,7 +175,15 @@ class FastSimulator:
         e.g. the gantry's mount and plate in every object scene at one position) once per distinct pose,
         and add it to each scene's other terms on the node grid, before the zone terms and the time walk
         (default; with ``cache_chunks`` only). A term is shared when it has at most half as many distinct
-        poses as there are scenes. Equal to ``share=False`` within float32 rounding.
+        poses as there are scenes; terms that repeat over the same scenes (the mount and its plate at each
+        position) are computed together, each such class once per distinct combination (so the mount is
+        computed once per position however many objects and lightings share it). Equal to ``share=False``
+        within float32 rounding.
+    pad_to : SimPlan, optional
+        A plan compiled before (e.g. the previous batch's ``plan``): this batch's object-term sizes are raised
+        to its sizes where smaller (:func:`~nlosplan.simulators.fast.plan.pad_plan`), so a sweep over objects
+        or positions reuses one compiled program instead of compiling one per batch. Equal within float32
+        rounding.
 
     Examples
     --------
@@ -188,7 +196,8 @@ class FastSimulator:
 
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
                  prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str | None = None,
-                 cache_chunks: bool = True, share: bool = True, threads: int | None = None):
+                 cache_chunks: bool = True, share: bool = True, threads: int | None = None,
+                 pad_to: SimPlan | None = None):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -202,7 +211,7 @@ class FastSimulator:
             deposit = default_deposit()
         if deposit not in DEPOSIT_METHODS:
             raise UserError(f"deposit={deposit!r} is not supported; allowed: {', '.join(DEPOSIT_METHODS)}")
-        self.plan: SimPlan = build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune)
+        self.plan: SimPlan = pad_plan(build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune), pad_to)
         if deposit != self.plan.static.deposit:
             self.plan = dataclasses.replace(self.plan, static=dataclasses.replace(self.plan.static, deposit=deposit))
         self.chunk = max(1, int(chunk))
@@ -318,22 +327,57 @@ class FastSimulator:
         first = np.array([int(np.flatnonzero(group == g)[0]) for g in range(len(index))])
         return tuple(terms), first, group
 
+    def shared_classes(self) -> list[tuple[tuple[int, ...], np.ndarray, np.ndarray]]:
+        """:meth:`shared_terms` split into classes of terms that repeat over the same scenes.
+
+        The mount and its plate repeat wherever the position does, an object's two terms wherever the object
+        and position do (e.g. both lightings): each class is computed once per distinct combination of its own
+        terms, not of every shared term together.
+
+        Returns
+        -------
+        list of (terms, first, group)
+            As :meth:`shared_terms`, one per class, in term order (empty when nothing is shared).
+        """
+        share = self.shared_terms()
+        if share is None:
+            return []
+        terms, first, group = share
+        plan = self.plan
+        classes: dict = {}
+        for k in terms:
+            obj, attr = plan.object_index[k], plan.object_albedo[k]
+            near = sorted(plan.object_near_index[k].items())
+            col = [(int(plan.object_mesh_index[k][j]), np.asarray(sc.objects[obj].to_world, np.float64).tobytes(),
+                    float(getattr(sc.objects[obj], attr)), tuple(np.asarray(idx[j]).tobytes() for _, idx in near))
+                   for j, sc in enumerate(self.scenes)]
+            index: dict = {}
+            g = np.array([index.setdefault(key, len(index)) for key in col])
+            classes.setdefault(g.tobytes(), (g, []))[1].append(k)
+        out = []
+        for g, ks in classes.values():
+            out.append((tuple(ks), np.array([int(np.flatnonzero(g == u)[0]) for u in range(int(g.max()) + 1)]), g))
+        return out
+
     def _shared_node_table(self, terms: dict):
-        """``(terms, group, nodes (S, U, Z, n_nodes) ndarray)`` of :meth:`shared_terms`, computed once, or None."""
+        """``(terms, [(group (N,), nodes (S, U, Z, n_nodes) ndarray) per class])`` of :meth:`shared_classes`, computed
+        once, or None."""
         if self._shared is None:
-            share = self.shared_terms()
-            if share is None:
+            classes = self.shared_classes()
+            if not classes:
                 self._shared = False
             else:
-                only, first, group = share
                 scene_np = self._scene_arrays()
-                outs = []
-                for start in range(0, len(first), self.chunk):  # chunks of the scenes' shape: one compile each way
-                    idx = first[np.arange(start, start + self.chunk).clip(max=len(first) - 1)]
-                    chunk_p = to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype)
-                    keep = min(self.chunk, len(first) - start)
-                    outs.append(np.asarray(_SHARED(self.plan.static, self._arrays, chunk_p, terms, only))[:, :keep])
-                self._shared = (only, group, np.concatenate(outs, axis=1))
+                tables = []
+                for only, first, group in classes:
+                    outs = []
+                    for start in range(0, len(first), self.chunk):  # chunks of the scenes' shape: one compile each way
+                        idx = first[np.arange(start, start + self.chunk).clip(max=len(first) - 1)]
+                        chunk_p = to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype)
+                        keep = min(self.chunk, len(first) - start)
+                        outs.append(np.asarray(_SHARED(self.plan.static, self._arrays, chunk_p, terms, only))[:, :keep])
+                    tables.append((group, np.concatenate(outs, axis=1)))
+                self._shared = (tuple(sorted(k for c in classes for k in c[0])), tables)
         return self._shared or None
 
     def _run(self, parts: bool, progress=None):
@@ -345,9 +389,10 @@ class FastSimulator:
             if shared is None:
                 run = lambda chunk_p, idx: _BATCHED_TERMS(static, self._arrays, chunk_p, terms, parts)  # noqa: E731
             else:
-                only, group, nodes = shared
+                only, tables = shared
                 run = lambda chunk_p, idx: _BATCHED_SHARED(  # noqa: E731
-                    static, self._arrays, chunk_p, terms, parts, only, jnp.asarray(nodes[:, group[idx]], self.dtype))
+                    static, self._arrays, chunk_p, terms, parts, only,
+                    jnp.asarray(sum(nodes[:, group[idx]] for group, nodes in tables), self.dtype))
         else:  # before issue 20: the chunks gathered from the device arrays and the sensor terms, every call
             scene_p, sensor_p = self._jax_params()
             chunks = [(jax.tree_util.tree_map(lambda a: a[idx], scene_p), keep) for idx, keep in self._chunk_index()]
