@@ -230,8 +230,9 @@ def add(sub) -> None:
     b.add_argument("--reflectance", choices=["retroreflective", "lambertian"], default="retroreflective",
                    help="object reflectance (default: retroreflective)")
     b.add_argument("--seed", type=seed_type(), default=0, help="build seed, 0 to 2**32-1 (default: 0)")
-    b.add_argument("--batch", type=int_type(1), default=100, help="scenes per simulator call (default: 100); keep it when resuming "
-                                                                   "(it fixes the float32 rounding of the means)")
+    b.add_argument("--batch", type=int_type(1), default=100, help="positions per run (default: 100): the positions are cut into runs of N and "
+                   "every object and lighting of a run is simulated together, up to 1,200 scenes per call; keep it "
+                   "when resuming (it fixes the float32 rounding of the means)")
     b.add_argument("--fsync", action="store_true",
                    help="fsync every commit (survives power cuts; a build resumes identically anyway)")
     b.add_argument("--json", action="store_true", help="machine-readable summary")
