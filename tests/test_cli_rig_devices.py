@@ -125,7 +125,7 @@ def test_auto_finds_a_telemetrix_gantry_on_its_port(capsys, tmp_path):
     (["--emulate", "--rig-file", "r.toml"], "--rig-file describes a Telemetrix gantry"),
     (["--emulate", "--gantry-kind", "telemetrix", "--home"], "--home and --unlock are GRBL's"),
     (["--emulate", "--gantry-kind", "telemetrix", "--work-offset", "keep"], "--work-offset is GRBL's"),
-    (["--emulate", "--work-offset", "middle"], "work offset 'middle': use auto, keep, or X,Y"),
+    (["--emulate", "--work-offset", "middle"], "--work-offset 'middle': use auto, keep, or X,Y"),
 ])
 def test_flags_that_do_not_apply_are_errors(capsys, tmp_path, argv, message):
     code = main(["rig", "capture", "--store", str(tmp_path / "x.db"), *argv])
