@@ -39,7 +39,7 @@ SETTINGS = settings(max_examples=15, deadline=None, derandomize=True, suppress_h
 def _counts_impulses(t, w, edges, sigma, scale, iterations, background):
     return expected_counts(
         t, w, edges_ps=edges, sigma_ps=sigma, photon_scale=scale, iterations=iterations,
-        background_per_bin=background,
+        floor_per_bin=background,
     )
 
 
@@ -47,7 +47,7 @@ def _counts_impulses(t, w, edges, sigma, scale, iterations, background):
 def _counts_boxes(t, w, edges, sigma, scale, iterations, background, pulse):
     return expected_counts(
         t, w, edges_ps=edges, sigma_ps=sigma, photon_scale=scale, iterations=iterations,
-        background_per_bin=background, pulse=pulse,
+        floor_per_bin=background, pulse=pulse,
     )
 
 
@@ -55,7 +55,7 @@ def _counts_boxes(t, w, edges, sigma, scale, iterations, background, pulse):
 def _counts_pileup(t, w, edges, sigma, scale, iterations, background, crosstalk):
     return expected_counts(
         t, w, edges_ps=edges, sigma_ps=sigma, photon_scale=scale, iterations=iterations,
-        background_per_bin=background, crosstalk=crosstalk, pileup=True, max_count=2**24 - 1,
+        floor_per_bin=background, crosstalk=crosstalk, pileup=True, max_count=2**24 - 1,
     )
 
 
