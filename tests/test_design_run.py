@@ -247,7 +247,7 @@ def test_mitsuba_twin_reference_agrees_with_the_fast_one():
     assert rel < 0.05, rel  # the cross-validation's tolerance (3.1 % measured, mostly at the direct peak)
     assert abs(twin.means.sum() / fast.means.sum() - 1) < 0.01
     assert (twin.crlb_jac == fast.crlb_jac).all()  # the bound's Jacobians stay the fast backend's
-    with pytest.raises(Exception, match="unknown simulation backend 'blender'"):
+    with pytest.raises(Exception, match="unknown backend 'blender'; available: fast, mitsuba"):
         SceneSet(objects=("A",), backend="blender")
 
 
