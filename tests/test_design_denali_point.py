@@ -42,16 +42,28 @@ def test_a_row_judges_the_real_figure_against_the_same_requirement():
     assert (met["verdict"], met["real_verdict"], met["agrees"]) == (MET, MET, True)
     assert met["interval"] == [0.036, 0.044] and met["bound"] == 0.016 and met["bound_name"] == "Cramér–Rao bound"
     assert met["real_in_interval"] is False and met["train_captures"] == 2100 and met["threshold"] == 0.05
+    assert met["real_beats_bound"] is False
+    # DENALI's real 4.56 cm below this world's Cramér–Rao bound: the world is harder than the real one
+    harder = point_row(LOC, est(0.09, 0.087, 0.093, NOT_MET), bound=(0.047, 0.047, 0.047), real=0.0456, **kw)
+    assert harder["real_beats_bound"] is True
+    text = denali_point_text({"denali_point": [{**harder, "denali_design": True}]})
+    assert "4.6 cm against the Cramér–Rao bound's 4.7 cm" in text and "harder than the real one" in text
     assert (met["task"], met["metric"], met["requirement"], met["evaluator"]) == ("loc", "loc_rmse", LOC.name, "trained")
     not_met = point_row(SHAPE, est(0.05, 0.04, 0.06, NOT_MET), bound=(0.52, 0.50, 0.54), real=0.3876, **kw)
     assert (not_met["verdict"], not_met["real_verdict"], not_met["agrees"]) == (NOT_MET, MET, False)
     assert not_met["bound_interval"] == [0.50, 0.54] and not_met["bound_name"] == "ideal observer"
+    assert not_met["real_beats_bound"] is False  # 38.8 % is within reach of the observer's 50-54 %
+    assert point_row(SHAPE, None, bound=(0.30, 0.28, 0.32), real=0.3876, **kw)["real_beats_bound"] is True
     undecided = point_row(SIZE, est(0.91, 0.88, 0.95, UNDECIDED), bound=None, real=0.9468, **kw)
     assert (undecided["verdict"], undecided["real_verdict"], undecided["agrees"]) == (UNDECIDED, MET, False)
     assert undecided["real_in_interval"] is True and undecided["bound"] is None
     # a stricter requirement: DENALI's 4.56 cm does not meet 3 cm, the prediction does (optimistic)
     strict = point_row(Requirement("loc", 0.03), est(0.02, 0.018, 0.022, MET), bound=None, real=0.0456, **kw)
     assert (strict["real_verdict"], strict["agrees"]) == (NOT_MET, False)
+    said = denali_point_text({"denali_point": [{**r, "denali_design": True} for r in (met, undecided, strict)]})
+    assert "too wide to decide" in said and "size top1_acc >= 0.9 (undecided, real met)" in said
+    assert "more optimistic than reality for loc loc_rmse <= 0.03 m (met, real not met)" in said
+    assert "disagree with reality" not in said and "Every verdict here agrees" not in said
     # not trained at the design, an infinite Cramér–Rao bound, or not DENALI's design: nothing to judge
     none = point_row(LOC, None, bound=(math.inf, math.inf, math.inf), real=0.0456, **kw)
     assert none["verdict"] is None and none["agrees"] is None and none["bound"] is None and none["predicted"] is None

@@ -71,9 +71,9 @@ def disagreement_text(summary: dict) -> str:
         n = max((r["train_captures"] or 0 for r in harder), default=0)
         budget = f"they train on {n:,} captures for seconds" if n else "they train for seconds"
         out.append(f"At DENALI's design this run's verdicts disagree with reality for {_names(harder)}: DENALI's "
-                   "hardware meets them, but the simulated world is harder than the real one (DENALI's own recipe "
-                   "on simulated captures, `nlosplan bench denali`, falls short of Table 1 too) and the design's "
-                   f"learners are weaker than DENALI's recipe ({budget}, against {DENALI_RECIPE}).")
+                   "hardware meets them; the measured causes are that the simulated world is harder than the real "
+                   "one (`nlosplan bench denali` runs DENALI's own recipe on simulated captures beside Table 1) and "
+                   f"that the design's learners are weaker than DENALI's recipe ({budget}, against {DENALI_RECIPE}).")
     if easier:
         out.append(f"At DENALI's design this run is more optimistic than reality for {_names(easier)}: DENALI's "
                    "measured figure does not meet them, so the simulated world or its learner promises more than "
@@ -83,6 +83,13 @@ def disagreement_text(summary: dict) -> str:
         out.append(f"Undecided where DENALI's real figure lies inside the predicted interval for {_names(wide)}: the "
                    "prediction does not contradict reality, its interval is too wide to decide (more seeds, or a "
                    "learner that varies less between runs, would).")
+    beyond = [r for r in summary.get("denali_point", []) if r.get("real_beats_bound")]
+    if beyond:
+        out.append("DENALI's real figure lies beyond this world's own bound at the same design for "
+                   + ", ".join(f"{r['requirement']} ({_fmt(r['task'], r['real'])} against the {r['bound_name']}'s "
+                               f"{_fmt(r['task'], r['bound'])})" for r in beyond)
+                   + ": even the bound of this world falls short of reality there, so the simulated world is harder "
+                     "than the real one.")
     return " ".join(out)
 
 
@@ -98,8 +105,8 @@ def denali_point_text(summary: dict) -> str:
             "simulated world, predicted by each task's learner (the mean of its seeds with the 95 % interval) and "
             f"bounded by the task's bound, beside DENALI's measured Table 1 ({DENALI_RECIPE}); a real figure "
             "judged against the same requirement.")
-    dis = disagreement_text(summary)
-    return lead + " " + (dis or "Every verdict here agrees with DENALI's real result.")
+    agree = "" if any(r["agrees"] is False for r in rows) else "Every verdict here agrees with DENALI's real result."
+    return " ".join(t for t in (lead, agree, disagreement_text(summary)) if t)
 
 
 def answer_note(summary: dict, requirement: str) -> str:

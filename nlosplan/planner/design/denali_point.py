@@ -114,7 +114,8 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
         ``seeds``, ``evaluator`` (``"trained"``), ``learner``, ``captures``, ``train_captures``, ``bound``,
         ``bound_interval``, ``bound_name``, ``real``, ``real_source``, ``verdict`` (the prediction's; None when
         not trained), ``real_verdict`` (``met``/``not met`` of the real figure; None without one), ``agrees``
-        (None where either verdict is missing) and ``real_in_interval``.
+        (None where either verdict is missing), ``real_in_interval`` and ``real_beats_bound`` (the real figure
+        lies beyond this world's bound at the design: the simulated world is harder than the real one).
     """
     verdict = None if predicted is None else predicted.verdict
     real_verdict = None if real is None or not compare else (MET if req.met(real) else NOT_MET)
@@ -130,7 +131,16 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
             "verdict": verdict, "real_verdict": real_verdict,
             "agrees": None if verdict is None or real_verdict is None else verdict == real_verdict,
             "real_in_interval": (None if predicted is None or real_verdict is None
-                                 else bool(predicted.lo <= real <= predicted.hi))}
+                                 else bool(predicted.lo <= real <= predicted.hi)),
+            "real_beats_bound": None if b is None or real_verdict is None else _beats(req, real, b)}
+
+
+def _beats(req: Requirement, real: float, bound: tuple[float, float, float]) -> bool:
+    """Whether a real figure lies beyond the bound's interval (below a Cramér–Rao bound, above an observer's)."""
+    value, lo, hi = bound
+    if req.smaller_is_better:
+        return bool(real < (lo if math.isfinite(lo) else value))
+    return bool(real > (hi if math.isfinite(hi) else value))
 
 
 def answer_note(req: Requirement, verdict: str, cost: float | None, denali_cost: float,
