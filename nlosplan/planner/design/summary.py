@@ -10,6 +10,9 @@ no met candidate but an undecided one: *undecided* (and why: the seeds or
 the budget ran out); otherwise *not met*, with what the learners and the
 bound reach (met by the bound but by no learner: "reachable in principle").
 
+At DENALI's design point (``denali_point``) and the evaluators' consistency (``consistency``):
+:mod:`~nlosplan.planner.design.denali_point`.
+
 Minimum requirement per parameter: along each axis from the reference
 design (the other parameters kept), the least hardware whose trained metric
 meets the requirement, interpolated between the grid points around the
