@@ -140,13 +140,15 @@ def _definitions_text(summary: dict) -> str:
 
 
 def minimum_hardware_text(summary: dict, ref_bin_ps: float | None = None) -> str:
-    """The terminal table: the verdict and answer per requirement, then the per-parameter requirements."""
+    """The terminal table: the rows at DENALI's design point, the verdict and answer per requirement, then the
+    per-parameter requirements."""
     a = answer_table(summary).drop(columns=["why"])
     why = "\n".join(f"  {c['requirement']}: {c['verdict']}: {_why(summary, c)}" for c in summary["cheapest"])
     r = requirements_table(summary)
     model = summary.get("world_model")
     world = f"\nsimulated world: sensor {model['sensor']}; scenes: {model['scene']}" if model else ""
-    return (_denali_text(summary) + format_table(a.to_dict("records")) + "\n" + why + world + "\n\nminimum requirement per parameter (others at the "
+    return (_denali_text(summary) + format_table(a.to_dict("records")) + "\n" + why + world
+            + "\n\nminimum requirement per parameter (others at the "
             f"reference {summary['reference_sensor']}):\n" + format_table(r.to_dict("records"))
             + "\n\nloc_rmse: " + summary["metric_definitions"]["loc_rmse"])
 

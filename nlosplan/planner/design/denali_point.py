@@ -186,8 +186,9 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     Returns
     -------
     list of dict
-        :func:`point_row`'s fields, plus ``denali_cost`` (the reference design's cost), ``denali_design`` (whether the reference is
-        DENALI's geometry: where it is not, ``real_verdict`` and ``agrees`` are None) and ``answer_note``.
+        :func:`point_row`'s fields, plus ``denali_cost`` (the reference design's cost), ``denali_design``
+        (whether the reference is DENALI's geometry: where it is not, ``real_verdict`` and ``agrees`` are None)
+        and ``answer_note``.
     """
     base, space = evidence.base, evidence.space
     denali = is_denali_design(base, space.sensor)
