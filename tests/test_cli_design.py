@@ -97,3 +97,4 @@ def test_help_teaches_with_examples(capsys):
     assert "least sensor hardware" in out
     assert "--seed" in out and "--models" in out and "--worlds" in out
     assert "sqrt of the mean of the squared" in out and "undecided" in out
+    assert "DENALI's own design point" in out and '"denali_point"' in out and "4.56 cm" in out

@@ -141,6 +141,48 @@ def test_report_is_written_and_self_contained(finished):
         assert (out / p.split("/")[-1]).stat().st_size > 5000
 
 
+def test_the_answer_at_denali_s_design_comes_first_beside_table_1(finished, tmp_path):
+    import copy
+
+    out, result = finished
+    rows = {r["task"]: r for r in result["denali_point"]}
+    assert list(rows) == ["loc", "shape", "size"] and [r["requirement"] for r in rows.values()] == \
+        result["requirements_asked"]
+    # DENALI's Table 1 (real captures, its 1D CNN): metres and fractions, as the rest of result.json
+    assert rows["loc"]["real"] == pytest.approx(0.0456) and rows["shape"]["real"] == pytest.approx(0.3876)
+    assert rows["size"]["real"] == pytest.approx(0.9468)
+    assert [r["threshold"] for r in rows.values()] == [0.05, 0.35, 0.9]
+    for task, r in rows.items():
+        learner = next(x for x in result["learners"] if x["task"] == task and x["chosen"])
+        assert r["learner"] == learner["model"] and r["predicted"] == pytest.approx(learner["value"])
+        lo, hi = r["interval"]
+        assert lo <= r["predicted"] <= hi and r["verdict"] in ("met", "not met", "undecided")
+        assert r["real_verdict"] == "met" and r["agrees"] == (r["verdict"] == "met")
+        assert 0 < r["train_captures"] < 60 and r["captures"] == "simulated" and r["denali_design"]
+        assert r["bound"] is not None and r["design"]["zones"] == "3x3"
+    assert isinstance(result["consistency"], list)
+    for c in result["consistency"]:  # any flagged figure names its design, learner and bound
+        assert c["design"] and c["learner"] and c["bound"] is not None and c["issue"]
+    write_design_report(result, tmp_path)
+    html, md = (tmp_path / "report.html").read_text(), (tmp_path / "report.md").read_text()
+    for text in (html, md):
+        assert (text.index("At DENALI&#x27;s own design point" if text is html else "## At DENALI's own design point")
+                < text.index("Answer: the cheapest design per task") < text.index("Minimum requirement per parameter"))
+        assert "Evaluator consistency" in text
+    # everything shown is escaped, whatever a row holds
+    hostile = copy.deepcopy(result)
+    hostile["denali_point"][0].update(learner="<script>alert(1)</script>", requirement="<b>loc</b>")
+    hostile["consistency"] = [{"task": "loc", "requirement": "<i>r</i>", "design": "<img src=x onerror=1>",
+                               "learner": "mlp", "value": 0.01, "lo": 0.009, "hi": 0.011, "seeds": 1, "bound": 0.02,
+                               "bound_lo": 0.02, "bound_hi": 0.02, "bound_name": "Cramér–Rao bound",
+                               "issue": "<script>x()</script>"}]
+    write_design_report(hostile, tmp_path / "hostile")
+    page = (tmp_path / "hostile" / "report.html").read_text()
+    assert "<script>alert(1)" not in page and "&lt;script&gt;alert(1)&lt;/script&gt;" in page
+    assert "<img src=x" not in page and "<script>x()" not in page and "<b>loc</b>" not in page
+    assert "1 learner figure(s) beat their task" in page
+
+
 def test_bad_reference_is_a_recorded_failure(tmp_path):
     job = DesignJob("bound", "loc", Design(), 0, DEFAULT_FIDELITY["bound"], None, str(tmp_path / "missing.npz"),
                     DesignSpace().sensor.to_dict())

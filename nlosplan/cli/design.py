@@ -51,14 +51,25 @@ minimum hardware is the cheapest design met in at least 90 % of them. With --rea
 the trained evaluator uses real captures from a store instead (designs finer than the
 captures are reported unreachable; no worlds).
 
+First the answer at DENALI's own design point (3x3, 128 bins of 92.8 ps, no added
+jitter, all photons): each task's predicted metric with its interval, learner and
+training captures, its bound, and DENALI's real Table 1 figure (1D CNN on real
+captures: 4.56 cm, 38.8 %, 94.7 %) with both verdicts and whether they agree; a
+sentence where they disagree, and beside an answer that needs more hardware than
+DENALI's although DENALI meets the requirement in reality. A learner that beats its
+bound (Cramer-Rao, ideal observer) beyond its interval is flagged.
+
 Output (OUT): report.html (self-contained), report.md, PNG plots, result.json,
 design_checkpoint.json and design_evaluations.jsonl (every evaluation; --resume
 continues from them; a rerun into a folder with a previous run needs --resume or
 --overwrite). Progress goes to stderr, also with --json.
-JSON: {"cheapest": [{"requirement", "verdict", "design", "value", "lo", "hi",
-"worlds"}...], "requirements": [{"task", "parameter", "minimum" or "maximum",
-"interval", "verdict", "feasible"}...], "learners": [...], "metric_definitions": {...},
-"report": PATH}."""
+JSON: {"denali_point": [{"task", "metric", "requirement", "predicted", "interval",
+"evaluator", "learner", "train_captures", "bound", "real", "real_source", "verdict",
+"real_verdict", "agrees", "answer_note"}...], "consistency": [{"task", "design",
+"learner", "value", "bound", "issue"}...], "cheapest": [{"requirement", "verdict",
+"design", "value", "lo", "hi", "worlds"}...], "requirements": [{"task", "parameter",
+"minimum" or "maximum", "interval", "verdict", "feasible"}...], "learners": [...],
+"metric_definitions": {...}, "report": PATH}; loc_rmse in metres."""
 
 
 def requirement_type(text: str):
@@ -159,7 +170,8 @@ def _cmd_design(args) -> int:
         result["report"] = paths["html"]
         result["report_markdown"] = paths["markdown"]
         write_json(Path(args.out, "result.json"), result, default=str, indent=1)
-    short = {"cheapest": result["cheapest"],
+    short = {"denali_point": result["denali_point"], "consistency": result["consistency"],
+             "cheapest": result["cheapest"],
              "requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "unit", "minimum", "maximum",
                                                  "interval", "verdict", "feasible", "note") if k in r}
                               for r in result["requirements"]],

@@ -1,12 +1,13 @@
 """The design report: ``report.md``, a self-contained ``report.html`` and the PNG plots beside them.
 
-The first screen answers the question: for each requirement, its verdict
+The first screen answers the question: first what the run predicts at DENALI's own design point beside
+DENALI's real Table 1 (and, where a verdict disagrees, why), then for each requirement, its verdict
 (met / not met / undecided), the cheapest design that meets it (with its
 metric, interval, margin and the worlds it holds in) and why, then the
 minimum requirement per parameter. Below: the metric definitions, the
 learners, the worlds (what would change the answer), the trade-off curves,
 Pareto fronts, the evaluators' error against run time and the
-bound-to-trained gap, failures and unreachable designs, the stability
+bound-to-trained gap, whether a learner beats its bound, failures and unreachable designs, the stability
 catalog and provenance.
 """
 
@@ -21,6 +22,9 @@ from pathlib import Path
 import pandas as pd
 
 from nlosplan.files import write_text
+from nlosplan.reports.denali_section import (CONSISTENCY_TITLE, DENALI_TITLE, answer_note, consistency_table,
+                                             consistency_text, denali_point_table, denali_point_text,
+                                             disagreement_text)
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
 from nlosplan.reports.realism_section import realism_section
 from nlosplan.reports.tables import format_table, markdown_table
@@ -73,8 +77,14 @@ def answer_table(summary: dict, ref_bin_ps: float | None = None) -> pd.DataFrame
                      "worlds held": _worlds_text(c),
                      "margin": f"{100 * c['margin']:+.0f} %" if ok else "n/a",
                      "cost": f"{c['cost']:.2f}" if ok else "n/a", "learner": c["learner"],
-                     "from": c["source"], "why": c["decision"]})
+                     "from": c["source"], "why": _why(summary, c)})
     return pd.DataFrame(rows)
+
+
+def _why(summary: dict, c: dict) -> str:
+    """The answer's decision, and the sentence where it needs more than DENALI's hardware."""
+    note = answer_note(summary, c["requirement"])
+    return f"{c['decision'].rstrip('.')}. {note}" if note else c["decision"]
 
 
 def requirements_table(summary: dict) -> pd.DataFrame:
@@ -130,15 +140,33 @@ def _definitions_text(summary: dict) -> str:
 
 
 def minimum_hardware_text(summary: dict, ref_bin_ps: float | None = None) -> str:
-    """The terminal table: the verdict and answer per requirement, then the per-parameter requirements."""
+    """The terminal table: the rows at DENALI's design point, the verdict and answer per requirement, then the
+    per-parameter requirements."""
     a = answer_table(summary).drop(columns=["why"])
-    why = "\n".join(f"  {c['requirement']}: {c['verdict']}: {c['decision']}" for c in summary["cheapest"])
+    why = "\n".join(f"  {c['requirement']}: {c['verdict']}: {_why(summary, c)}" for c in summary["cheapest"])
     r = requirements_table(summary)
     model = summary.get("world_model")
     world = f"\nsimulated world: sensor {model['sensor']}; scenes: {model['scene']}" if model else ""
-    return (format_table(a.to_dict("records")) + "\n" + why + world + "\n\nminimum requirement per parameter (others at the "
+    return (_denali_text(summary) + format_table(a.to_dict("records")) + "\n" + why + world
+            + "\n\nminimum requirement per parameter (others at the "
             f"reference {summary['reference_sensor']}):\n" + format_table(r.to_dict("records"))
             + "\n\nloc_rmse: " + summary["metric_definitions"]["loc_rmse"])
+
+
+def _denali_text(summary: dict) -> str:
+    """The terminal's first lines: the rows at DENALI's design, the disagreement and the consistency, short."""
+    if not summary.get("denali_point"):
+        return ""
+    t = denali_point_table(summary).drop(columns=["learner"])
+    lines = [f"{DENALI_TITLE} (predicted by the learners in the simulated world; DENALI real: Table 1):",
+             format_table(t.to_dict("records"))]
+    dis = disagreement_text(summary)
+    if dis:
+        lines.append(dis)
+    n = len(summary.get("consistency", []))
+    lines.append("evaluators consistent: no learner beats its bound beyond its interval" if not n else
+                 f"evaluators INCONSISTENT: {n} learner figure(s) beat their bound beyond their interval (report)")
+    return "\n".join(lines) + "\n\nleast hardware per requirement:\n"
 
 
 def _gap_rows(summary: dict) -> pd.DataFrame:
@@ -192,6 +220,9 @@ def _headline(summary: dict, ref_bin_ps: float | None = None) -> str:
             parts.append(f"**{c['requirement']}**: undecided: {c['decision']}")
         else:
             parts.append(f"**{c['requirement']}**: not met: {c['decision']}")
+        note = answer_note(summary, c["requirement"])
+        if note:
+            parts[-1] += f"; {note.rstrip('.')}"
     model = summary.get("world_model")
     where = (f" Simulated world: sensor {model['sensor']}, scenes with {model['scene']}." if model else "")
     return "; ".join(parts) + "." + where
@@ -233,6 +264,7 @@ def write_design_report(result: dict, out) -> dict:
     failures = result["failures"]
     wsum = result.get("worlds")
     sections = [
+        (DENALI_TITLE, denali_point_text(result), denali_point_table(result)),
         ("Answer: the cheapest design per task", _headline(result), answer),
         ("Minimum requirement per parameter",
          f"Along each parameter from the reference ({result['reference_sensor']}, the others kept), the least "
@@ -265,10 +297,11 @@ def write_design_report(result: dict, out) -> dict:
          "How far the trained models are from the fast bounds on the designs evaluated by both; the optimizer "
          "screens with the bound corrected by this gap, and the cheapest candidates are verified by training.",
          _gap_rows(result)),
+        (CONSISTENCY_TITLE, consistency_text(result), consistency_table(result)),
         ("Evaluators: error against run time", "Every evaluation records its run time and interval.",
          _evaluator_rows(result)),
     ]
-    sections.insert(1, realism_section(result["reference_sensor"]))
+    sections.insert(2, realism_section(result["reference_sensor"]))
     if result.get("disagreements"):
         n = sum(d["disagree"] for d in result["disagreements"])
         sections.append(("Simulated against real captures",
@@ -327,7 +360,7 @@ def _html(result, sections, plots, stab_text, failures, unreachable, prov) -> st
     for i, (title, text, df) in enumerate(sections):
         parts.append(f"<h2>{html.escape(title)}</h2>")
         lead = html.escape(text).replace("**", "")
-        parts.append(f"<p class='lead'>{lead}</p>" if i == 0 else f"<p>{lead}</p>")
+        parts.append(f"<p class='lead'>{lead}</p>" if i < 2 else f"<p>{lead}</p>")
         parts.append(_df_html(df))
     parts.append("<h2>Plots</h2>")
     for name, path in plots.items():

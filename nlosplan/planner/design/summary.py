@@ -10,6 +10,9 @@ no met candidate but an undecided one: *undecided* (and why: the seeds or
 the budget ran out); otherwise *not met*, with what the learners and the
 bound reach (met by the bound but by no learner: "reachable in principle").
 
+At DENALI's design point (``denali_point``) and the evaluators' consistency (``consistency``):
+:mod:`~nlosplan.planner.design.denali_point`.
+
 Minimum requirement per parameter: along each axis from the reference
 design (the other parameters kept), the least hardware whose trained metric
 meets the requirement, interpolated between the grid points around the
@@ -30,6 +33,7 @@ import math
 import numpy as np
 
 from nlosplan.planner.design import robust
+from nlosplan.planner.design.denali_point import consistency, denali_point
 from nlosplan.planner.design.evaluation import Evaluator, Status
 from nlosplan.planner.design.evidence import Candidate, Evidence
 from nlosplan.planner.design.lines import CONTINUOUS, MORE_IS_BETTER, lines, line_points
@@ -333,7 +337,10 @@ def summarize(evidence: Evidence) -> dict:
     for req in evidence.requirements:
         sp = evidence.spread(req)
         spreads[req.name] = {"sd_score": sp.sd, "dof": sp.dof, "designs": sp.designs}
+    base = user_design(evidence.base, space)
     return {"requirements": rows, "cheapest": cheapest, "unreachable": unreachable,
+            "denali_point": [{**r, "design": base} for r in denali_point(evidence, cheapest)],
+            "consistency": consistency(evidence),
             "disagreements": [row for req in evidence.requirements for row in _disagreements(evidence, req)],
             "reference_bin_ps": space.sensor.bin_width_ps, "pareto": pareto, "curves": curves,
             "evaluators": _evaluators(evidence), "gap": gaps, "failures": failures,
