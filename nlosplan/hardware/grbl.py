@@ -286,7 +286,7 @@ class Grbl(GrblLink):
         feed = self.feed_mm_min if feed_mm_min is None else float(feed_mm_min)
         if not (math.isfinite(feed) and feed > 0):
             raise UserError(f"feed rate {feed_mm_min!r} mm/min must be > 0")
-        self.send(f"G90 G21 G1 X{x:.3f} Y{y:.3f} F{feed:.0f}")
+        self.send(f"G90 G21 G1 X{x:.3f} Y{y:.3f} F{feed:.0f}", timeout=max(self.timeout, self.MOTION_OK_S))
         if not wait:
             return None
         context = f"moving to ({x:.3f}, {y:.3f}) mm"
@@ -301,6 +301,11 @@ class Grbl(GrblLink):
 
     #: Longest wait (s) for a move to start when GRBL still reports Idle away from the target after its 'ok'.
     START_WAIT_S = 1.0
+    #: Seconds a motion line may wait for its ``ok``: GRBL answers when the block enters its planner buffer
+    #: (later while the buffer is full), and an emulated gantry answers late while its process is busy (the
+    #: emulated sensor's simulator compiling holds the interpreter for seconds: a park after SIGTERM on a loaded
+    #: CI host waited 5 s in vain). A link that died names itself after this long during a move.
+    MOTION_OK_S = 30.0
 
     def _reached(self, xy, target) -> bool:
         """Within half a step (``$100``/``$101``) plus 0.01 mm of ``target`` on both axes."""
