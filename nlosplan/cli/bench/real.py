@@ -1,9 +1,10 @@
 """``nlosplan bench real``: every real-data check, printed against the targets of issue 16.
 
-Three checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
+Four checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
 distances, all zones, cross-validated by distance (``calibrate``'s all-zone
 model: each capture is predicted by the sensor file of a fit that did not see
-it); ``table2``, DENALI's Table 2 (the 3x3 rows and the ratios) from noisy
+it); ``floor``, the same captures' floor noise against the noise model's
+(:func:`nlosplan.calibration.floor_noise.floor_dispersion`); ``table2``, DENALI's Table 2 (the 3x3 rows and the ratios) from noisy
 simulated captures of the DENALI preset with DENALI's processing, nothing fitted;
 ``checkpoints``, DENALI's networks trained on real captures run on simulated ones
 (:func:`nlosplan.tasks.denali_bench.checkpoint_check`), with the breakdown of their
@@ -47,7 +48,30 @@ def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=Non
             "fold_seconds": [f["seconds"] for f in cv.fold_fits], "seconds": cv.seconds}
 
 
-PARTS = ("plane", "table2", "checkpoints")
+PARTS = ("plane", "floor", "table2", "checkpoints")
+
+
+def run_floor(path) -> dict:
+    """The floor part: the Fano factor of the plane captures' late bins beside the noise model's (Poisson)."""
+    from nlosplan.calibration.floor_noise import floor_dispersion
+    from nlosplan.calibration.tmf882x_fit import load_distance_captures
+
+    _check_plane(path)
+    d = floor_dispersion(load_distance_captures(path).hists)
+    (lo, hi), (mlo, mhi) = d.real_interval, d.model_interval
+    return d.to_dict() | {"data": str(path), "poisson": lo <= mhi and mlo <= hi}   # the two intervals overlap
+
+
+def format_floor(f: dict) -> str:
+    """The floor part as text."""
+    lo, hi = f["real_interval"]
+    mlo, mhi = f["model_interval"]
+    return (f"floor noise ({f['data']}): bins {f['first_bin']}-{f['last_bin']} of {f['windows']} capture-zone windows, median "
+            f"floor {f['level_counts']:.0f} counts per bin, trend of degree {f['degree']} removed\n"
+            f"  Fano factor (residual variance / mean): real {f['real_median']:.3f} [{lo:.3f}, {hi:.3f}], "
+            f"noise model (Poisson about the same means) {f['model_median']:.3f} [{mlo:.3f}, {mhi:.3f}] (95 %)\n"
+            f"  {'the real floor scatters like Poisson counts' if f['poisson'] else 'the real floor is NOT Poisson'}"
+            f" at this level; per zone: " + ", ".join(f"{z['zone']}: {z['median']:.2f}" for z in f["per_zone"]))
 CHECKPOINTS_HINT = ("give --checkpoints DIR, DENALI's benchmark/main_table/checkpoints (github.com/NikhilBehari/"
                     "denali), to run its real-trained networks on simulated captures")
 
@@ -134,12 +158,15 @@ def _cmd(args) -> int:
     from nlosplan.reports.realism_table import format_plane_table, format_table2
 
     parts = _parts(args.parts)
-    if "plane" in parts:   # every input is checked before the first (minute-long) part runs
+    if "plane" in parts or "floor" in parts:   # every input is checked before the first (minute-long) part runs
         _check_plane(args.plane)
     if "table2" in parts:
         load_stats(args.stats)   # a small file, read again by the part: its errors are one line before any work
     cks = _check_checkpoints(args) if "checkpoints" in parts else None
     out, texts = {}, []
+    if "floor" in parts:
+        out["floor"] = run_floor(args.plane)
+        texts.append(format_floor(out["floor"]))
     if "table2" in parts:
         t2 = run_table2(args.stats, args.denali_sensor, args.positions)
         out["table2"] = t2
@@ -173,7 +200,11 @@ def add_bench(bsub) -> None:
                                     "'nlosplan calibrate' cross-validated by distance, per zone: sub-bin peak error "
                                     "(<= 0.15 bin mean), normalized L1 of the shape (<= 8 % mean, <= 15 % max), "
                                     "amplitude predicted/measured (0.8-1.25). About 1 min per fold on 2 idle cores. "
-                                    "JSON: {\"plane\": {\"zones\": [{\"zone\", \"subbin_err_mean\", \"l1_mean\", "
+                                    "Floor: the same captures' late bins (96-127, trend removed), their Fano factor "
+                                    "(variance / mean) beside the noise model's on the same means: is the floor "
+                                    "Poisson? (under a second). "
+                                    "JSON: {\"floor\": {\"real_median\", \"real_interval\", \"model_median\", "
+                                    "\"model_interval\", \"poisson\", \"per_zone\", ...}, \"plane\": {\"zones\": [{\"zone\", \"subbin_err_mean\", \"l1_mean\", "
                                     "\"l1_max\", \"amp_ratio_min\", \"amp_ratio_max\"}...], \"summary\", ...}, "
                                     "\"table2\": {\"rows\": [{\"light\", \"size\", \"total\", \"centroid\", "
                                     "\"spread\", \"skew\", \"real\": {...}}...], \"ratios\": {...}}}. Table 2: DENALI's "
@@ -194,12 +225,12 @@ def add_bench(bsub) -> None:
                                     "\"rms_log_var_ratio\", ...}...}}...], \"real_breakdown\": {...}.",
                         epilog=f"examples:\n  {EXAMPLE}\n  {EXAMPLE_CHECKPOINTS}",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--plane", default=DEFAULT_PLANE, help="plane captures JSON (default: %(default)s)")
+    p.add_argument("--plane", default=DEFAULT_PLANE, help="plane and floor: plane captures JSON (default: %(default)s)")
     p.add_argument("--sensor", default="tmf8828-3x3-short", help="sensor to calibrate (default: %(default)s)")
     p.add_argument("--folds", type=int_type(2, 100), default=5, help="folds by distance (default: %(default)s)")
     p.add_argument("--min-distance", type=number_type(float, zero_ok=True), default=0.06, help="nearest capture scored, m (default: 0.06)")
-    p.add_argument("--parts", default="plane,table2,checkpoints",
-                   help="checks to run, from plane, table2, checkpoints (default: %(default)s)")
+    p.add_argument("--parts", default="plane,floor,table2,checkpoints",
+                   help="checks to run, from plane, floor, table2, checkpoints (default: %(default)s)")
     p.add_argument("--stats", default="denali-table2",
                    help="table2: statistics file (default: %(default)s, the shipped DENALI Table 2)")
     p.add_argument("--denali-sensor", default="denali-tmf8828-3x3",
