@@ -12,6 +12,7 @@ from nlosplan.cli import main
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import PRESET_NAMES, load_sensor_file, preset
 from nlosplan.sensor_models import fitted_to as ft
+from nlosplan.sensor_models import preset_sources as ps
 from nlosplan.sensor_models.presets_denali import DENALI_NUISANCES_FIT, DENALI_SCENE_FIT
 
 
@@ -23,11 +24,11 @@ def run(capsys, *argv):
 
 def test_denali_preset_record_names_table2_its_levels_and_their_parameters():
     s = preset("denali-tmf8828-3x3")
-    rec = ft.preset_record("denali-tmf8828-3x3")
+    rec = ps.preset_record("denali-tmf8828-3x3")
     t2, levels = rec[0], rec[1]
     assert t2.source == "DENALI Table 2" and t2.use == "fitted" and "calibration/data/denali_table2.toml" in t2.ref
     # the hash the record names is the shipped file's (unchanged since the fit; a new Table 2 needs a refit)
-    assert t2.sha256 == hashlib.sha256(shipped_path().read_bytes()).hexdigest() == ft.TABLE2_SHA256
+    assert t2.sha256 == hashlib.sha256(shipped_path().read_bytes()).hexdigest() == ps.TABLE2_SHA256
     assert t2.parameters == {"photon_scale": s.photon_scale, "dark_rate_hz": s.dark_rate_hz}
     assert t2.scene["albedo"] == DENALI_SCENE_FIT["albedo"] == 0.3667
     assert t2.scene["early_residual_counts"] == DENALI_NUISANCES_FIT["early_residual_counts"]
@@ -43,7 +44,7 @@ def test_denali_preset_record_names_table2_its_levels_and_their_parameters():
                                                          "pulse_tail_fraction", "pulse_tail_decay_ps"}
     assert ft.record_summary(rec) == "DENALI Table 2 + checkpoint levels"
     # the 8x8 preset takes the 3x3 fit's values: the same sources, assumed, with the 8x8 nuisances
-    rec8 = ft.preset_record("denali-tmf8828-8x8")
+    rec8 = ps.preset_record("denali-tmf8828-8x8")
     assert [r.source for r in rec8] == [r.source for r in rec] and {r.use for r in rec8} == {"assumed"}
     assert rec8[0].scene["early_residual_counts"] == pytest.approx(48.76 * 10_240 / 10_240_000)
     assert ft.record_summary(rec8) == "none (assumed)"
@@ -52,7 +53,7 @@ def test_denali_preset_record_names_table2_its_levels_and_their_parameters():
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_every_preset_record_holds_its_own_values_and_round_trips(name):
     s = preset(name)
-    rec = ft.preset_record(name)
+    rec = ps.preset_record(name)
     assert rec, name  # every shipped preset takes some values from real data (none is datasheet-only)
     for src in rec:
         assert src.parameters and src.use in ft.USES and src.ref and src.what
@@ -64,18 +65,18 @@ def test_every_preset_record_holds_its_own_values_and_round_trips(name):
 
 
 def test_which_presets_are_fitted_and_which_assumed():
-    fitted = {n for n in PRESET_NAMES if any(s.use == "fitted" for s in ft.preset_record(n))}
+    fitted = {n for n in PRESET_NAMES if any(s.use == "fitted" for s in ps.preset_record(n))}
     assert fitted == {"tmf8828-3x3-short", "tmf8828-3x3-plane-unit", "denali-tmf8828-3x3"}
-    vl = ft.preset_record("vl53l8ch-8x8")
+    vl = ps.preset_record("vl53l8ch-8x8")
     assert [set(s.parameters) for s in vl] == [{"photon_scale", "ambient_rate_hz", "dark_rate_hz"}]
     assert "no VL53L8CH data" in vl[0].what
-    unit = ft.preset_record("tmf8828-3x3-plane-unit")[0]
+    unit = ps.preset_record("tmf8828-3x3-plane-unit")[0]
     assert {"zone_gains", "iterations", "time_walk_ps"} <= set(unit.parameters)
 
 
 def test_plane_captures_hash_is_the_shared_files(shared_data):
     path = shared_data / "tmf882x_distance" / "distance_data_even.json"
-    assert hashlib.sha256(path.read_bytes()).hexdigest() == ft.PLANE_SHA256
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == ps.PLANE_SHA256
 
 
 def test_sensor_show_prints_fitted_to(capsys):
@@ -83,7 +84,7 @@ def test_sensor_show_prints_fitted_to(capsys):
     assert code == 0
     section = out[out.index("fitted to:"):]
     assert "DENALI Table 2: nlosplan/calibration/data/denali_table2.toml" in section
-    assert f"sha256 {ft.TABLE2_SHA256[:16]}" in section
+    assert f"sha256 {ps.TABLE2_SHA256[:16]}" in section
     assert "gave: photon_scale = 0.28395, dark_rate_hz = 1.24506e+06" in section
     assert "held fixed: ambient_rate_hz = 0" in section
     assert section.index("DENALI checkpoint levels") < section.index("assumed from real data of another unit")
@@ -113,8 +114,8 @@ def test_record_round_trips_through_a_sensor_file_and_drops_changed_values(capsy
     code, text, _ = run(capsys, "sensor", "show", "denali-tmf8828-3x3", f"--{fmt}")
     path = tmp_path / f"d.{fmt}"
     path.write_text(text)
-    s, rec, changed, origin = ft.sensor_record(path)
-    assert s == preset("denali-tmf8828-3x3") and rec == ft.preset_record("denali-tmf8828-3x3") and not changed
+    s, rec, changed, origin = ps.sensor_record(path)
+    assert s == preset("denali-tmf8828-3x3") and rec == ps.preset_record("denali-tmf8828-3x3") and not changed
     assert origin == "the file's own record"
     # a value changed in the file (not in its record) is no longer fitted to Table 2 and is named
     if fmt == "json":
@@ -123,7 +124,7 @@ def test_record_round_trips_through_a_sensor_file_and_drops_changed_values(capsy
         path.write_text(json.dumps(data))
     else:
         path.write_text(re.sub(r"(?m)^photon_scale = .*$", "photon_scale = 0.3", text, count=1))
-    s, rec, changed, _ = ft.sensor_record(path)
+    s, rec, changed, _ = ps.sensor_record(path)
     assert s.photon_scale == 0.3 and changed == ["photon_scale"]
     assert rec[0].parameters == {"dark_rate_hz": s.dark_rate_hz}
     code, out, _ = run(capsys, "sensor", "show", str(path))
@@ -136,12 +137,12 @@ def test_record_round_trips_through_a_sensor_file_and_drops_changed_values(capsy
 def test_a_base_file_without_a_record_takes_its_presets_less_what_it_changes(tmp_path):
     path = tmp_path / "b.toml"
     path.write_text('base = "tmf8828-3x3-short"\nbin_width_ps = 95.0\n')
-    s, rec, changed, origin = ft.sensor_record(path)
+    s, rec, changed, origin = ps.sensor_record(path)
     assert changed == ["bin_width_ps"] and "base preset tmf8828-3x3-short" in origin
     assert "bin_width_ps" not in rec[0].parameters and rec[0].parameters["start_offset_ps"] == s.start_offset_ps
     path.write_text('base = "tmf8828-3x3-short"\nbin_width_ps = 95.0\nphoton_scale = 1.0\nambient_rate_hz = 0.0\n'
                     'dark_rate_hz = 0.0\n')
-    _, rec, changed, _ = ft.sensor_record(path)
+    _, rec, changed, _ = ps.sensor_record(path)
     assert [r.source for r in rec] == ["TMF882x plane captures: time base and pulse"]
     assert changed == ["bin_width_ps", "photon_scale", "ambient_rate_hz", "dark_rate_hz"]
 
@@ -178,7 +179,7 @@ def test_stats_record_names_the_file_its_hash_levels_and_keeps_the_rest(tmp_path
     rec = stats_record(stats, table, "denali-tmf8828-3x3", fitted, values, free, "3x3", "the command", True)
     first, levels = rec[0], rec[1]
     assert first.ref == str(stats) and first.sha256 == hashlib.sha256(stats.read_bytes()).hexdigest()
-    assert first.sha256 != ft.TABLE2_SHA256  # the file it was given, not the shipped one
+    assert first.sha256 != ps.TABLE2_SHA256  # the file it was given, not the shipped one
     assert first.source.startswith("DENALI (CVPR 2026), Table 2") and first.use == "fitted"
     assert first.parameters == {"photon_scale": 0.3, "dark_rate_hz": 1.3e6} and first.scene == {"albedo": 0.4}
     assert first.held["ambient_rate_hz"] == 0.0 and first.held["mount"] is True
@@ -192,4 +193,4 @@ def test_stats_record_names_the_file_its_hash_levels_and_keeps_the_rest(tmp_path
     # the shipped file by its name: the package path and the recorded hash
     rec = stats_record("denali-table2", load_stats("denali-table2"), "denali-tmf8828-3x3", fitted, values, free,
                        "3x3", "the command", True)
-    assert rec[0].sha256 == ft.TABLE2_SHA256 and "nlosplan/calibration/data/denali_table2.toml" in rec[0].ref
+    assert rec[0].sha256 == ps.TABLE2_SHA256 and "nlosplan/calibration/data/denali_table2.toml" in rec[0].ref

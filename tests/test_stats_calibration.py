@@ -218,7 +218,8 @@ def test_calibrate_stats_cli_writes_sensor_scene_table_and_uncertainty(tmp_path)
     import hashlib
 
     from nlosplan.calibration.stats_file import shipped_path
-    from nlosplan.sensor_models.fitted_to import record_dicts, sensor_record
+    from nlosplan.sensor_models.fitted_to import record_dicts
+    from nlosplan.sensor_models.preset_sources import sensor_record
 
     table2, levels = data["fitted_to"][0], data["fitted_to"][1]
     assert table2["sha256"] == hashlib.sha256(shipped_path().read_bytes()).hexdigest() and table2["use"] == "fitted"

@@ -28,7 +28,8 @@ from nlosplan.calibration.stats_score import scene_for, scene_table_path, scene_
 from nlosplan.calibration.stats_variants import MODEL_VARIANTS, variant_fits, variant_samples
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig, resolve_sensor, sensor_base
-from nlosplan.sensor_models.fitted_to import RealSource, record_dicts, sensor_record, without
+from nlosplan.sensor_models.fitted_to import RealSource, record_dicts, without
+from nlosplan.sensor_models.preset_sources import sensor_record
 
 __all__ = ["DEFAULT_SENSOR", "StatsCalibration", "calibrate_stats", "check_free", "stats_record"]
 

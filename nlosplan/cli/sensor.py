@@ -21,7 +21,8 @@ def _provenance(name: str) -> str:
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.sensor_models import PRESET_NAMES, preset
-    from nlosplan.sensor_models.fitted_to import preset_record, record_summary
+    from nlosplan.sensor_models.fitted_to import record_summary
+    from nlosplan.sensor_models.preset_sources import preset_record
     from nlosplan.simulators.presets.scene_model import CALIBRATED_SCENE_MODELS, DEFAULT_SENSOR
 
     rows = []
@@ -43,7 +44,8 @@ def _cmd_sensor_list(args) -> int:
 
 def _cmd_sensor_show(args) -> int:
     from nlosplan.sensor_models import PRESET_NAMES, preset_uncertainty, sensor_base
-    from nlosplan.sensor_models.fitted_to import record_dicts, record_lines, sensor_record
+    from nlosplan.sensor_models.fitted_to import record_dicts, record_lines
+    from nlosplan.sensor_models.preset_sources import sensor_record
 
     s, record, changed, origin = sensor_record(args.name)
     unc = preset_uncertainty(args.name) if args.name in PRESET_NAMES else None

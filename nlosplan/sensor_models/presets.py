@@ -253,7 +253,7 @@ def load_sensor_file(path) -> SensorConfig:
     partial file without ``base``, an unknown or missing field and a wrong
     type are errors naming the file and the field. A ``fitted_to`` record
     (the real data its values were fitted to, :mod:`.fitted_to`) is checked
-    here and read by :func:`~.fitted_to.sensor_record`; the sensor does not
+    here and read by :func:`~.preset_sources.sensor_record`; the sensor does not
     carry it.
 
     Raises

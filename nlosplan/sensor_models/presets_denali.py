@@ -15,7 +15,7 @@ Fitted (``nlosplan calibrate --stats`` on the shipped DENALI Table 2 file,
 projectors running during every capture) and the scene parameters of
 :data:`DENALI_SCENE_FIT`; the lights-on extra (``ambient_rate_hz``) is held
 at 0 (not in the fit's default ``--fit``). The record of these sources is
-:func:`.fitted_to.preset_record`.
+:func:`.preset_sources.preset_record`.
 Uncertainties: ``data/denali-tmf8828-3x3.uncertainty.json`` (:func:`.presets.preset_uncertainty`; the sensor
 fields only, as its contract says; the scene parameters' and nuisances' intervals are
 :data:`DENALI_SCENE_INTERVALS`). The 8x8 preset ships none: its values are the 3x3
