@@ -213,6 +213,21 @@ def test_calibrate_stats_cli_writes_sensor_scene_table_and_uncertainty(tmp_path)
     u = json.loads((tmp_path / "d.uncertainty.json").read_text())
     assert set(u["parameters"]) == {"photon_scale", "dark_rate_hz"} and len(u["samples"]) == 5
     assert "albedo" in tomllib.loads((tmp_path / "d.scene.toml").read_text())["uncertainty"]
+    # the record of what it was fitted to: the statistics file with its hash and the checkpoint levels, in the JSON
+    # and in the sensor file, and read back from the file
+    import hashlib
+
+    from nlosplan.calibration.stats_file import shipped_path
+    from nlosplan.sensor_models.fitted_to import record_dicts
+    from nlosplan.sensor_models.preset_sources import sensor_record
+
+    table2, levels = data["fitted_to"][0], data["fitted_to"][1]
+    assert table2["sha256"] == hashlib.sha256(shipped_path().read_bytes()).hexdigest() and table2["use"] == "fitted"
+    assert table2["parameters"] == {k: data["fit"]["values"][k] for k in ("photon_scale", "dark_rate_hz")}
+    assert table2["scene"] == {"albedo": data["fit"]["values"]["albedo"]} and "--positions 1" in table2["by"]
+    assert "checkpoint mean count per bin = 5020" in levels["what"]
+    _, rec, changed, _ = sensor_record(out)
+    assert record_dicts(rec) == data["fitted_to"] and not changed
     # scored back through --score with its sidecar: the same figures as the fit's own score
     r = subprocess.run([sys.executable, "-m", "nlosplan", "calibrate", "--score", "denali-table2", "--sensor", str(out),
                         "--positions", "1", "--json"], capture_output=True, text=True)

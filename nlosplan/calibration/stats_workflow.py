@@ -20,16 +20,18 @@ from pathlib import Path
 from typing import Callable
 
 from nlosplan.calibration.bootstrap import MIN_RESAMPLES
-from nlosplan.calibration.stats_file import StatsFile, load_stats
+from nlosplan.calibration.stats_file import SHIPPED, SHIPPED_NAME, StatsFile, load_stats, resolve_stats_path
 from nlosplan.calibration.stats_fit import (DEFAULT_FREE, FITTABLE, StatsFit, bootstrap, fit_stats, intervals, split,
                                             uncertainty_dict)
-from nlosplan.calibration.stats_model import SENSOR_PARAMS, components
+from nlosplan.calibration.stats_model import NUISANCE_PARAMS, SCENE_PARAMS, SENSOR_PARAMS, components
 from nlosplan.calibration.stats_score import scene_for, scene_table_path, scene_table_toml, score_stats
 from nlosplan.calibration.stats_variants import MODEL_VARIANTS, variant_fits, variant_samples
 from nlosplan.errors import UserError
 from nlosplan.sensor_models import SensorConfig, resolve_sensor, sensor_base
+from nlosplan.sensor_models.fitted_to import RealSource, record_dicts, without
+from nlosplan.sensor_models.preset_sources import sensor_record
 
-__all__ = ["DEFAULT_SENSOR", "StatsCalibration", "calibrate_stats", "check_free"]
+__all__ = ["DEFAULT_SENSOR", "StatsCalibration", "calibrate_stats", "check_free", "stats_record"]
 
 #: The sensor a statistics file is fitted to unless another is given (DENALI's Table 2 made it).
 DEFAULT_SENSOR = "denali-tmf8828-3x3"
@@ -78,6 +80,8 @@ class StatsCalibration:
         The ``X.uncertainty.json`` document.
     method : str
         How the uncertainty was measured, in words.
+    fitted_to : tuple of RealSource
+        The real data the fitted sensor's values come from (:func:`stats_record`), written into its file.
     """
 
     spec: str
@@ -97,6 +101,7 @@ class StatsCalibration:
     intervals: dict
     uncertainty: dict | None
     method: str
+    fitted_to: tuple = ()
     files: dict = field(default_factory=dict)
 
     def write(self, out) -> dict[str, str]:
@@ -111,7 +116,9 @@ class StatsCalibration:
                                             f"statistics, {res['meets']['ratios']} of {res['meets']['ratios_of']} "
                                             "ratios within target).").strip())
         base = sensor_base(self.spec)  # the refined preset, so that later model fields come from it
-        write_text(out, fitted.to_toml(base=base) if out.suffix == ".toml" else fitted.to_json(base=base))
+        record = record_dicts(self.fitted_to)
+        write_text(out, fitted.to_toml(base=base, fitted_to=record) if out.suffix == ".toml"
+                   else fitted.to_json(base=base, fitted_to=record))
         files = {"sensor": str(out)}
         st = scene_table_path(out)
         write_text(st, scene_table_toml(self.scene, self.nuisances,
@@ -127,7 +134,7 @@ class StatsCalibration:
         return files
 
     def to_dict(self) -> dict:
-        """JSON-friendly: the fit, the variants, the uncertainty, the score and the files written."""
+        """JSON-friendly: the fit, the variants, the uncertainty, the score, the record and the files written."""
         fit = self.fit
         return {"sensor": self.sensor.name, "statistics": self.source, "fit": {
             "values": fit.values, "free": list(fit.free), "objective": fit.objective, "converged": fit.converged,
@@ -135,7 +142,78 @@ class StatsCalibration:
             "variants": [{**v.as_dict(), "objective": r.objective, "converged": r.converged,
                           "values": {k: r.values[k] for k in fit.free}} for v, r in zip(MODEL_VARIANTS, self.variants)],
             "uncertainty": self.uncertainty, "intervals": self.intervals, "uncertainty_method": self.method,
-            "score": self.score, "files": dict(self.files)}
+            "score": self.score, "fitted_to": record_dicts(self.fitted_to), "files": dict(self.files)}
+
+
+def stats_record(stats, table: StatsFile, sensor: str, fitted: SensorConfig, values: dict, free, zones: str,
+                 by: str, mount: bool) -> tuple[RealSource, ...]:
+    """The ``fitted_to`` record of a sensor fitted to a statistics file.
+
+    The file (its path as given, or the shipped file's for ``denali-table2``, and the sha256 of its content) with
+    the fitted sensor fields, scene parameters and nuisances and what the fit held fixed; its ``[[levels]]`` for
+    this zone mode, when it has any (fitted jointly: one objective); then the starting sensor's own record less
+    what was refitted (its time base and pulse, for example).
+
+    Parameters
+    ----------
+    stats : str or Path
+        The statistics file as given.
+    table : StatsFile
+        It, loaded.
+    sensor : str
+        The sensor spec fitted (preset name or file), whose record the rest comes from.
+    fitted : SensorConfig
+        The fitted sensor.
+    values : dict
+        The fit's values (sensor fields, scene parameters, nuisances).
+    free : sequence of str
+        The fitted parameters.
+    zones : str
+        The zone mode fitted (``"3x3"``).
+    by : str
+        The command that made it.
+    mount : bool
+        Whether the scene had the mount.
+    """
+    import hashlib
+
+    path = resolve_stats_path(stats)
+    sha = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    ref = (f"{SHIPPED_NAME} (package data nlosplan/calibration/data/{SHIPPED})" if str(stats) == SHIPPED_NAME
+           else str(stats))
+    sensor_free = [k for k in free if k in SENSOR_PARAMS]
+    params = {k: getattr(fitted, k) for k in sensor_free}
+    scene = {k: values[k] for k in free if k not in SENSOR_PARAMS}
+    held = {k: getattr(fitted, k) for k in SENSOR_PARAMS if k not in free}
+    held |= {k: values[k] for k in SCENE_PARAMS + NUISANCE_PARAMS if k not in free and k in values} | {"mount": mount}
+    rows = table.rows_for(zones)
+    title = table.source.get("title", Path(path).name)
+    out = [RealSource(source=title, ref=ref, sha256=sha, use="fitted", by=by, parameters=params, scene=scene,
+                      held=held, what=(f"{len(rows)} rows of the {zones} statistics (total, centroid, spread, skew: "
+                                       f"mean +- SEM) and {len(table.ratios)} ratios, processed as the file's "
+                                       f"[processing.{zones}] says"))]
+    levels = [lev for lev in table.levels if lev.zones == zones]
+    if levels and params:
+        src = table.source.get("levels", "")
+        out.append(RealSource(
+            source=f"levels of {Path(path).name}", ref=ref + ", its [[levels]]", sha256=sha, use="fitted", by=by,
+            parameters=params, what="; ".join(f"{lev.name} = {lev.value:g} ({lev.statistic})" for lev in levels)
+            + "; fitted jointly with the rows (one objective)" + (f"; source: {src}" if src else "")))
+    _, start, _, _ = sensor_record(sensor)
+    return tuple(out) + without(start, list(free))
+
+
+def _by(stats, sensor: str, scene, free, positions: int, seed: int, bootstraps: int, variants: bool) -> str:
+    """The command line that makes this fit."""
+    parts = [f"nlosplan calibrate --stats {stats} --sensor {sensor} --fit {','.join(free)} --positions {positions} "
+             f"--seed {seed}"]
+    if scene:
+        parts.append(f"--scene {scene}")
+    if bootstraps:
+        parts.append(f"--bootstrap {bootstraps}")
+    if variants:
+        parts.append("--variants")
+    return " ".join(parts)
 
 
 def _method(bootstraps: int, variants: list) -> str:
@@ -206,8 +284,10 @@ def calibrate_stats(stats, *, sensor: str = DEFAULT_SENSOR, scene: str | None = 
         samples = samples + variant_samples(fit, refits)
     fitted, fscene, fnuis = split(fit.values, cfg)
     fscene["mount"] = bool(start_scene.get("mount", True))
+    record = stats_record(stats, table, sensor, fitted, fit.values, free, zones,
+                          _by(stats, sensor, scene, free, positions, seed, bootstraps, variants), fscene["mount"])
     return StatsCalibration(
         spec=sensor, sensor=cfg, source=str(stats), stats=table, positions=positions, seed=seed, fit=fit, samples=samples,
         variants=refits, bootstraps=bootstraps, fitted=fitted, scene=fscene, nuisances=fnuis,
         score=score_stats(table, fitted, fscene, fnuis, comp=comp), intervals=intervals(fit, samples),
-        uncertainty=uncertainty_dict(cfg.name, fit, samples), method=_method(bootstraps, refits))
+        uncertainty=uncertainty_dict(cfg.name, fit, samples), method=_method(bootstraps, refits), fitted_to=record)

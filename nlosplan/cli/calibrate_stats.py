@@ -71,6 +71,10 @@ def _text(cal, args) -> str:
     if cal.variants:
         lines += variant_summary(cal.variants)
     lines.append(format_table2(cal.score))
+    srcs = [f"{r.source.split(':')[0]} (sha256 {r.sha256[:12]}...)" if r.sha256 else r.source.split(":")[0]
+            for r in cal.fitted_to if r.use == "fitted"]
+    lines.append(f"fitted to: {'; '.join(srcs)}" + ("; the sensor file records it with the values each gave "
+                                                      "('nlosplan sensor show FILE')" if cal.files else ""))
     lines += [f"wrote {k}: {v}" for k, v in cal.files.items()]
     return "\n".join(lines)
 

@@ -21,6 +21,8 @@ def _provenance(name: str) -> str:
 def _cmd_sensor_list(args) -> int:
     from nlosplan.reports.tables import format_table
     from nlosplan.sensor_models import PRESET_NAMES, preset
+    from nlosplan.sensor_models.fitted_to import record_summary
+    from nlosplan.sensor_models.preset_sources import preset_record
     from nlosplan.simulators.presets.scene_model import CALIBRATED_SCENE_MODELS, DEFAULT_SENSOR
 
     rows = []
@@ -30,27 +32,36 @@ def _cmd_sensor_list(args) -> int:
                          bin_width_ps=s.bin_width_ps, fov_deg=f"{s.fov_x_deg:g}x{s.fov_y_deg:g}",
                          pulse="measured" if s.pulse_shape else f"{s.pulse_fwhm_ps:g} ps",
                          iterations=s.iterations, provenance=_provenance(name),
+                         fitted_to=record_summary(preset_record(name)),
                          scene="fitted" if name in CALIBRATED_SCENE_MODELS else "defaults"))
     note = (f"default: {DEFAULT_SENSOR} (design, dataset build, simulate --scene denali, rig emulators); "
-            "scene 'fitted': its DENALI scenes take the retro albedo, diffuse base and mount it was fitted with")
+            "scene 'fitted': its DENALI scenes take the retro albedo, diffuse base and mount it was fitted with; "
+            "fitted_to: the real data its values were fitted to ('none (assumed)': values measured on another unit "
+            "or mode; 'sensor show NAME' lists every source)")
     emit(args, {"presets": rows, "default": DEFAULT_SENSOR}, format_table(rows) + "\n" + note)
     return 0
 
 
 def _cmd_sensor_show(args) -> int:
-    from nlosplan.sensor_models import PRESET_NAMES, resolve_sensor, sensor_base, preset_uncertainty
+    from nlosplan.sensor_models import PRESET_NAMES, preset_uncertainty, sensor_base
+    from nlosplan.sensor_models.fitted_to import record_dicts, record_lines
+    from nlosplan.sensor_models.preset_sources import sensor_record
 
-    s = resolve_sensor(args.name)
+    s, record, changed, origin = sensor_record(args.name)
     unc = preset_uncertainty(args.name) if args.name in PRESET_NAMES else None
-    if args.toml:  # with its base preset, so that a saved copy takes later model fields from it
-        print(s.to_toml(base=sensor_base(args.name)))
+    # --toml/--json: a sensor file with its base preset (later model fields come from it) and the record as far as
+    # it still holds for these values, so that a saved copy keeps it
+    kept = None if record is None else record_dicts(record)
+    if args.toml:
+        print(s.to_toml(base=sensor_base(args.name), fitted_to=kept))
     elif args.json:
-        print(s.to_json(base=sensor_base(args.name)))
+        print(s.to_json(base=sensor_base(args.name), fitted_to=kept))
     else:
         for k, v in s.to_dict().items():
             if k == "pulse_shape" and v is not None:
                 v = f"{len(v)} samples of {s.pulse_shape_step_ps:g} ps, peak at sample {max(range(len(v)), key=v.__getitem__)}"
             print(f"{k:>22} = {v}")
+        print("\n".join(record_lines(record, changed, origin)))
         if unc is not None:
             print(f"uncertainty ({len(unc['samples'])} bootstrap refits; 95 % intervals):")
             for k, p in unc["parameters"].items():
@@ -74,7 +85,11 @@ def add(sub) -> None:
     s_list = sub_parser(ssub, "list", "sensor list", "list the sensor presets")
     s_list.add_argument("--json", action="store_true", help="machine-readable output")
     s_list.set_defaults(func=_cmd_sensor_list)
-    s_show = sub_parser(ssub, "show", "sensor show", "show one preset (or a .toml/.json sensor file)")
+    s_show = sub_parser(ssub, "show", "sensor show", "show one preset (or a .toml/.json sensor file)",
+                        "Show one preset (or a .toml/.json sensor file): its fields; 'fitted to:', the real data "
+                        "its values were fitted to (each source with its file and sha256, the values it gave, what "
+                        "the fit held fixed) and those assumed from another unit or mode; a shipped uncertainty. "
+                        "--toml/--json print a sensor file that keeps the record ([[fitted_to]] / \"fitted_to\").")
     s_show.add_argument("name", help="preset name or path to a .toml/.json sensor file")
     fmt = s_show.add_mutually_exclusive_group()
     fmt.add_argument("--json", action="store_true", help="print JSON")

@@ -286,9 +286,13 @@ class SensorConfig:
         except TypeError as exc:  # pragma: no cover - defensive
             raise UserError(f"invalid sensor configuration: {exc}") from None
 
-    def to_json(self, base: str | None = None) -> str:
-        """JSON text of :meth:`to_dict` (with ``base`` first when given: see :func:`~nlosplan.sensor_models.presets.load_sensor_file`)."""
+    def to_json(self, base: str | None = None, fitted_to: list | None = None) -> str:
+        """JSON text of :meth:`to_dict` (with ``base`` first when given: see
+        :func:`~nlosplan.sensor_models.presets.load_sensor_file`; ``fitted_to``, a list of plain-data entries of
+        :mod:`~nlosplan.sensor_models.fitted_to`, last when given)."""
         data = self.to_dict() if base is None else {"base": base, **self.to_dict()}
+        if fitted_to is not None:
+            data["fitted_to"] = fitted_to
         return json.dumps(data, indent=2)
 
     @classmethod
@@ -300,14 +304,16 @@ class SensorConfig:
             raise UserError(f"sensor JSON is not valid JSON: {exc.msg} at line {exc.lineno}") from None
         return cls.from_dict(data)
 
-    def to_toml(self, base: str | None = None) -> str:
+    def to_toml(self, base: str | None = None, fitted_to: list | None = None) -> str:
         """TOML text of :meth:`to_dict` (unset optional fields such as ``pulse_shape`` omitted; ``base`` first when
-        given)."""
+        given; ``fitted_to`` as ``[[fitted_to]]`` tables when given)."""
         import tomli_w
 
         data = {k: v for k, v in self.to_dict().items() if v is not None}
         if base is not None:
             data = {"base": base, **data}
+        if fitted_to is not None:
+            data["fitted_to"] = fitted_to
         return tomli_w.dumps(data)
 
     @classmethod
@@ -319,7 +325,7 @@ class SensorConfig:
             raise UserError(f"sensor TOML is not valid TOML: {exc}") from None
         return cls.from_dict(data)
 
-    def save(self, path: str | Path, base: str | None = None) -> None:
+    def save(self, path: str | Path, base: str | None = None, fitted_to: list | None = None) -> None:
         """Write every field to ``.toml`` or ``.json`` (chosen by the suffix), atomically.
 
         Parameters
@@ -329,14 +335,16 @@ class SensorConfig:
             The preset this sensor refines, written as ``base`` so that fields
             added to the model later take the preset's values (see
             :func:`~nlosplan.sensor_models.presets.load_sensor_file`).
+        fitted_to : list of dict, optional
+            The real data the values were fitted to (:mod:`~nlosplan.sensor_models.fitted_to`), written with them.
         """
         from nlosplan.files import write_text
 
         path = Path(path)
         if path.suffix == ".toml":
-            write_text(path, self.to_toml(base))
+            write_text(path, self.to_toml(base, fitted_to))
         elif path.suffix == ".json":
-            write_text(path, self.to_json(base))
+            write_text(path, self.to_json(base, fitted_to))
         else:
             raise UserError(f"sensor file {path} must end in .toml or .json")
 

@@ -251,7 +251,10 @@ def load_sensor_file(path) -> SensorConfig:
     later take the preset's values) or gives every field but
     :data:`OPTIONAL_FILE_FIELDS`. Nothing is filled in silently: an empty or
     partial file without ``base``, an unknown or missing field and a wrong
-    type are errors naming the file and the field.
+    type are errors naming the file and the field. A ``fitted_to`` record
+    (the real data its values were fitted to, :mod:`.fitted_to`) is checked
+    here and read by :func:`~.preset_sources.sensor_record`; the sensor does not
+    carry it.
 
     Raises
     ------
@@ -268,10 +271,14 @@ def load_sensor_file(path) -> SensorConfig:
 
 
 def _from_table(data: dict, path: Path) -> SensorConfig:
+    from nlosplan.sensor_models.fitted_to import parse_record
+
     fields = sorted(f.name for f in dataclasses.fields(SensorConfig))
     data = dict(data)
     base = data.pop("base", None)
-    check_keys(data, ["base", *fields], "field(s)")
+    if "fitted_to" in data:  # the record of real sources (:mod:`.fitted_to`): checked here, read by sensor_record
+        parse_record(data.pop("fitted_to"))
+    check_keys(data, ["base", "fitted_to", *fields], "field(s)")
     for name in ("pulse_shape",) + ZONE_FIELDS:
         if isinstance(data.get(name), list):
             data[name] = tuple(data[name])

@@ -12,8 +12,10 @@ per-zone terms are NOT facts of DENALI's unit and are left out).
 Fitted (``nlosplan calibrate --stats`` on the shipped DENALI Table 2 file,
 :data:`DENALI_FIT`): photon scale, the floor of the unit in the dark
 (``dark_rate_hz``: not SPAD dark counts but external IR, likely the RealSense
-projectors running during every capture), the lights-on extra
-(``ambient_rate_hz``), and the scene parameters of :data:`DENALI_SCENE_FIT`.
+projectors running during every capture) and the scene parameters of
+:data:`DENALI_SCENE_FIT`; the lights-on extra (``ambient_rate_hz``) is held
+at 0 (not in the fit's default ``--fit``). The record of these sources is
+:func:`.preset_sources.preset_record`.
 Uncertainties: ``data/denali-tmf8828-3x3.uncertainty.json`` (:func:`.presets.preset_uncertainty`; the sensor
 fields only, as its contract says; the scene parameters' and nuisances' intervals are
 :data:`DENALI_SCENE_INTERVALS`). The 8x8 preset ships none: its values are the 3x3
@@ -74,9 +76,10 @@ DENALI_SCENE_INTERVALS: dict = {
 DENALI_PROVENANCE = (
     "DENALI unit: iterations ({iterations}), FoV 41x52 deg (SPAD map 6): facts of DENALI's capture code; zones, "
     "128 bins, 24-bit: DS. Time base and 32-sample pulse: TMF882x MEAS; pulse tail: the plane unit's (chip physics). No per-zone terms "
-    "(unknown for this unit). Photon scale, floor in the dark (dark_rate_hz: external IR, not SPAD dark counts) and "
-    "lights-on extra (ambient_rate_hz): fitted by 'nlosplan calibrate --stats' on DENALI Table 2 "
-    "(calibration/data/denali_table2.toml) with the checkpoint levels. {scores}"
+    "(unknown for this unit). Photon scale and floor in the dark (dark_rate_hz: external IR, not SPAD dark counts): "
+    "fitted by 'nlosplan calibrate --stats' on DENALI Table 2 (calibration/data/denali_table2.toml) with the "
+    "checkpoint levels; the lights-on extra (ambient_rate_hz) held at 0 (not fitted). Sources: 'fitted to' in "
+    "'nlosplan sensor show'. {scores}"
 )
 #: Scores of the fit ('nlosplan calibrate --stats denali-table2 --bootstrap 40 --variants', 300 scenes per size,
 #: 3 noise seeds).
