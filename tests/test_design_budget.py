@@ -45,6 +45,15 @@ def test_bad_budgets_exit_2_with_one_line(capsys, tmp_path, value, words):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_budget_the_memory_cannot_hold_exits_2_before_any_work(capsys, tmp_path):
+    out = tmp_path / "o"
+    # 100,000 captures of 3x3 x 128 bins on 256 workers at once: hundreds of GB
+    assert main(["design", "--quick", "--train-captures", "100000", "--workers", "256", "--out", str(out)]) == 2
+    line = one_line(capsys)
+    assert "--train-captures 100,000 on 256 worker(s) needs about" in line and "give a smaller N" in line
+    assert not out.exists()
+
+
 def test_a_bad_budget_in_a_toml_file_is_one_line_naming_the_key(capsys, tmp_path):
     bad = tmp_path / "bad.toml"
     for value, words in (("0", "train_captures = 0 must be an integer from 2 to 100000"),

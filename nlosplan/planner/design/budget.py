@@ -35,7 +35,7 @@ from nlosplan.errors import UserError
 from nlosplan.resources import MAX_TRAIN_CAPTURES
 
 __all__ = ["TRAIN_CAPTURES", "TRAIN_NOTE", "MAX_TRAIN_CAPTURES", "requested", "check_captures_value", "training_scenes",
-           "default_captures", "Capacity", "real_capacity", "check_real_budget", "training_set", "budget_statement",
+           "default_captures", "check_budget_memory", "Capacity", "real_capacity", "check_real_budget", "training_set", "budget_statement",
            "TEST_SIZE"]
 
 #: The trained evaluator's knob (``[search.fidelity.trained] train_captures``).
@@ -132,6 +132,31 @@ def check_real_budget(n: int | None, store, where: dict) -> Capacity | None:
                         f"in {store} (its {cap.total:,} captures; the 70 % training side holds {cap.scenes:,} of their "
                         f"scenes; real captures cannot be drawn again): give at most {cap.captures:,}")
     return cap
+
+
+#: Bytes per histogram cell of one training capture while a learner's set is drawn and trained (float64 mean and
+#: int64 Poisson draw, the float32 set and its torch copy): an estimate, not a measured peak.
+BYTES_PER_CELL = 24
+
+
+def check_budget_memory(n: int | None, cells: int, workers: int) -> None:
+    """Refuse (one line, before any work) a budget whose training sets cannot be held by ``workers`` at once.
+
+    Parameters
+    ----------
+    n : int or None
+        The asked budget (None: the default; nothing to check).
+    cells : int
+        Histogram cells of the largest zone layout (rows x cols x bins).
+    workers : int
+        Evaluations that run at once.
+    """
+    if n is None:
+        return
+    from nlosplan.resources import check_memory
+
+    check_memory(float(n) * cells * BYTES_PER_CELL * workers, f"--train-captures {n:,} on {workers} worker(s)",
+                 "give a smaller N or fewer --workers")
 
 
 def _subset(y, have: int, n: int, seed: int, stratify: bool) -> np.ndarray:

@@ -28,8 +28,8 @@ from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
 from nlosplan.planner.design import reference_cache, robust
-from nlosplan.planner.design.budget import (budget_statement, check_real_budget, default_captures, real_capacity,
-                                            requested)
+from nlosplan.planner.design.budget import (budget_statement, check_budget_memory, check_real_budget,
+                                            default_captures, real_capacity, requested)
 from nlosplan.planner.design.catalog import keep as stability_keep
 from nlosplan.planner.design.catalog import kept_summary, run_catalog, stability_summary
 from nlosplan.planner.design.cost import CostModel
@@ -373,16 +373,19 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
     return sims, real, info, stability
 
 
-def check_inputs(cfg: DesignConfig) -> None:
-    """What a run needs from outside, checked before any work: the real captures' store and sensor, and that they
-    hold the training captures asked for (one line each)."""
+def check_inputs(cfg: DesignConfig, workers: int | None = None) -> None:
+    """What a run needs from outside, checked before any work: the real captures' store and sensor, that they hold
+    the training captures asked for, and memory for the learners' training sets (one line each)."""
+    budget = requested(cfg.search.fidelity[Evaluator.TRAINED.knobs])
+    cells = max(r * c for r, c in cfg.space.zones) * cfg.space.sensor.n_bins
+    check_budget_memory(budget, cells, workers or os.cpu_count() or 1)
     if cfg.real:
         captured = resolve_sensor(cfg.capture_sensor or cfg.space.reference)
         zones = f"{captured.zones_rows}x{captured.zones_cols}"
         where = check_captures(cfg.real, {**(cfg.real_where or {}), "zones": zones}, drop_backgrounds=True,
                                zones_hint="the real captures must have the capture sensor's zones (give the matching "
                                           "--capture-sensor)")
-        check_real_budget(requested(cfg.search.fidelity[Evaluator.TRAINED.knobs]), cfg.real, where)
+        check_real_budget(budget, cfg.real, where)
 
 
 def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
@@ -428,7 +431,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     t0 = time.perf_counter()
     out = Path(out)
     say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
-    check_inputs(cfg)
+    check_inputs(cfg, workers)
     worlds = None if cfg.real else _world_plan(cfg)  # a bad calibration uncertainty stops the run before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume, overwrite=overwrite, repair=repair,
