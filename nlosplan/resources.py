@@ -15,7 +15,7 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_DESIGN_SEED", "MAX_SEED",
+__all__ = ["MAX_DESIGN_SEED", "MAX_SEED", "MAX_TRAIN_CAPTURES",
            "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
            "format_bytes", "keep_freed_memory"]
 
@@ -25,6 +25,10 @@ MAX_SEED = 2**32 - 1
 #: ``seed * 1000 + i`` (``planner.design.search_config.SEED_STRIDE``) and must stay within :data:`MAX_SEED`,
 #: scikit-learn's limit on a split's ``random_state``.
 MAX_DESIGN_SEED = 1_000_000
+#: Most training captures a design learner may be given (``nlosplan design --train-captures``,
+#: ``[search.fidelity.trained] train_captures``): four times DENALI's 25,200; an 8x8 design of 128 bins holds them
+#: in about 3.3 GB of float32 per worker.
+MAX_TRAIN_CAPTURES = 100_000
 
 _GIB = 1024**3
 

@@ -6,7 +6,7 @@ import argparse
 
 from nlosplan.cli.common import emit, int_type, progress_bar, sub_parser
 from nlosplan.errors import UserError
-from nlosplan.resources import MAX_DESIGN_SEED
+from nlosplan.resources import MAX_DESIGN_SEED, MAX_TRAIN_CAPTURES
 from nlosplan.simulators import BACKENDS
 
 DEFAULT_OUT = "nlosplan-out/design"
@@ -39,6 +39,11 @@ and 1D CNN by default, compared on the reference design) trained on captures of 
 design verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout
 and bin width with the bound corrected by the measured bound-to-trained gap.
 
+A verdict is about the sensor and a learner with a training budget: "met with an MLP
+trained on 2,100 captures". --train-captures N sets the budget (training captures per
+learner at a design; default one per training scene: 2,100 in the main job, 700 with
+--quick), --models the learner family; both are in result.json, the report and the summary.
+
 Verdicts are met (the pessimistic end of the 95 % interval meets the requirement), not
 met (even the optimistic end fails) or undecided (it straddles). A run of a design at
 a seed draws new Poisson noise, a new train/test split and a new training seed; the
@@ -63,7 +68,8 @@ Output (OUT): report.html (self-contained), report.md, PNG plots, result.json,
 design_checkpoint.json and design_evaluations.jsonl (every evaluation; --resume
 continues from them; a rerun into a folder with a previous run needs --resume or
 --overwrite). Progress goes to stderr, also with --json.
-JSON: {"denali_point": [{"task", "metric", "requirement", "predicted", "interval",
+JSON: {"train_captures": {"requested", "default", "rule", "learner", "models", "epochs",
+"captures"}, "denali_point": [{"task", "metric", "requirement", "predicted", "interval",
 "evaluator", "learner", "train_captures", "bound", "real", "real_source", "verdict",
 "real_verdict", "agrees", "answer_note"}...], "consistency": [{"task", "design",
 "learner", "value", "bound", "issue"}...], "cheapest": [{"requirement", "verdict",
@@ -120,6 +126,12 @@ def build_config(args):
         cfg = replace(cfg, search=replace(cfg.search, seed=args.seed))
     if args.models is not None:
         cfg = replace(cfg, search=replace(cfg.search, models=args.models))
+    if args.train_captures is not None:
+        from nlosplan.planner.design.budget import TRAIN_CAPTURES
+
+        fid = {k: dict(v) for k, v in cfg.search.fidelity.items()}
+        fid["trained"][TRAIN_CAPTURES] = args.train_captures
+        cfg = replace(cfg, search=replace(cfg.search, fidelity=fid))
     if args.worlds is not None:
         cfg = replace(cfg, worlds=replace(cfg.worlds, count=args.worlds))
     for flag, value in (("--where", args.where), ("--capture-sensor", args.capture_sensor)):
@@ -175,7 +187,7 @@ def _cmd_design(args) -> int:
              "requirements": [{k: r[k] for k in ("task", "requirement", "parameter", "unit", "minimum", "maximum",
                                                  "interval", "verdict", "feasible", "note") if k in r}
                               for r in result["requirements"]],
-             "learners": [r for r in result["learners"] if r["chosen"]],
+             "learners": [r for r in result["learners"] if r["chosen"]], "train_captures": result["train_captures"],
              "worlds": None if result["worlds"] is None else {k: result["worlds"][k] for k in
                                                               ("count", "quorum", "needed", "sources")},
              "world_model": result.get("world_model"),
@@ -212,6 +224,14 @@ def add(sub) -> None:
     p.add_argument("--models", type=_models, default=None, metavar="M1,M2",
                    help="candidate learners, compared on the reference design; the best per task is used "
                         "(default mlp,cnn1d; also cnn3d, transformer)")
+    p.add_argument("--train-captures", type=int_type(2, MAX_TRAIN_CAPTURES), default=None, metavar="N",
+                   help="training captures each learner gets at a design (the training budget; a verdict is 'met "
+                        "with a 1D CNN trained on N captures'). Default: one per training scene (70 %% of the "
+                        "scenes: 2,100 for the main job's 3,000, 700 with --quick; the worlds' learners, on every "
+                        "2nd position, half that; with --real every real capture of the training scenes). Fewer: "
+                        "a seeded subset; more: further noisy captures of the training scenes are drawn (DENALI "
+                        "trained on 25,200: hours on 2 cores). With --real at most what the store's training side "
+                        f"holds. 2 to {MAX_TRAIN_CAPTURES:,}; a resume needs the same N")
     p.add_argument("--worlds", type=int_type(1, 64), default=None, metavar="K",
                    help="plausible worlds the cheapest met designs are checked in (default 8; quick 4)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help="output folder (default: %(default)s)")

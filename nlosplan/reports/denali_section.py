@@ -10,7 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 __all__ = ["DENALI_TITLE", "CONSISTENCY_TITLE", "denali_point_table", "denali_point_text", "disagreement_text",
-           "consistency_table", "consistency_text", "answer_note"]
+           "consistency_table", "consistency_text", "answer_note", "trained_verdict", "budget_text"]
 
 DENALI_TITLE = "At DENALI's own design point"
 CONSISTENCY_TITLE = "Evaluator consistency: learners against their bounds"
@@ -36,6 +36,31 @@ def _captures(n) -> str:
     return "?" if n is None else f"{n:,}"
 
 
+def trained_verdict(row: dict) -> str:
+    """A ``denali_point`` row's verdict with what it is about: "met with an MLP trained on 2,100 captures"."""
+    from nlosplan.tasks.names import model_phrase
+
+    if row["verdict"] is None:
+        return "not evaluated"
+    n = row["train_captures"]
+    return f"{row['verdict']} with {model_phrase(row['learner'])} trained on {_captures(n)} captures"
+
+
+def budget_text(summary: dict) -> str:
+    """One sentence: the run's training budget and learner family (``result.json``'s ``train_captures``)."""
+    from nlosplan.tasks.names import model_phrase
+
+    b = summary.get("train_captures")
+    if not b:
+        return ""
+    label = lambda m: model_phrase(m).split(" ", 1)[1]  # noqa: E731
+    learners = ", ".join(f"{task} {label(m)}" for task, m in b["learner"].items())
+    sets = "; --train-captures N sets it" if b["default"] else ""
+    return (f"Training budget: {b['requested']:,} {b['captures']} training captures per learner at a design "
+            f"({b['rule']}{sets}), at most {b['epochs']} epochs; learners {learners} (the best of "
+            f"{', '.join(map(label, b['models']))} on the reference design).")
+
+
 def denali_point_table(summary: dict) -> pd.DataFrame:
     """One row per requirement: the run's prediction at DENALI's design, its bound, DENALI's real figure, verdicts."""
     rows = []
@@ -48,7 +73,7 @@ def denali_point_table(summary: dict) -> pd.DataFrame:
                                  f"captures, {r['seeds']} seed(s)"),
                      "bound": (f"{_fmt(task, r['bound'])} ({r['bound_name']})" if r["bound"] is not None
                                 else f"n/a ({r['bound_name']})"),
-                     "verdict": r["verdict"] or "not evaluated",
+                     "verdict": trained_verdict(r),
                      "DENALI real": _fmt(task, r["real"]), "real verdict": r["real_verdict"] or "n/a",
                      "agrees": "n/a" if agrees is None else ("yes" if agrees else "NO")})
     return pd.DataFrame(rows, columns=["requirement", "predicted [95 % interval]", "learner", "bound", "verdict",
@@ -106,7 +131,9 @@ def denali_point_text(summary: dict) -> str:
             f"bounded by the task's bound, beside DENALI's measured Table 1 ({DENALI_RECIPE}); a real figure "
             "judged against the same requirement.")
     agree = "" if any(r["agrees"] is False for r in rows) else "Every verdict here agrees with DENALI's real result."
-    return " ".join(t for t in (lead, agree, disagreement_text(summary)) if t)
+    short = [f"{r['requirement']}: {r['train_note']}" for r in rows if r.get("train_note")]
+    fewer = f"Fewer training captures than asked: {'; '.join(short)}." if short else ""
+    return " ".join(t for t in (lead, budget_text(summary), agree, fewer, disagreement_text(summary)) if t)
 
 
 def answer_note(summary: dict, requirement: str) -> str:

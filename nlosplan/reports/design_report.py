@@ -22,9 +22,9 @@ from pathlib import Path
 import pandas as pd
 
 from nlosplan.files import write_text
-from nlosplan.reports.denali_section import (CONSISTENCY_TITLE, DENALI_TITLE, answer_note, consistency_table,
-                                             consistency_text, denali_point_table, denali_point_text,
-                                             disagreement_text)
+from nlosplan.reports.denali_section import (CONSISTENCY_TITLE, DENALI_TITLE, answer_note, budget_text,
+                                             consistency_table, consistency_text, denali_point_table,
+                                             denali_point_text, disagreement_text)
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
 from nlosplan.reports.realism_section import realism_section
 from nlosplan.reports.tables import format_table, markdown_table
@@ -147,6 +147,8 @@ def minimum_hardware_text(summary: dict, ref_bin_ps: float | None = None) -> str
     r = requirements_table(summary)
     model = summary.get("world_model")
     world = f"\nsimulated world: sensor {model['sensor']}; scenes: {model['scene']}" if model else ""
+    budget = budget_text(summary)
+    world += f"\n{budget}" if budget else ""
     return (_denali_text(summary) + format_table(a.to_dict("records")) + "\n" + why + world
             + "\n\nminimum requirement per parameter (others at the "
             f"reference {summary['reference_sensor']}):\n" + format_table(r.to_dict("records"))

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 from nlosplan.errors import UserError
 
-__all__ = ["MODEL_NAMES", "TASKS", "TASK_LABEL", "SPLITS", "PROFILES", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE",
+__all__ = ["MODEL_NAMES", "MODEL_LABELS", "model_phrase",
+           "TASKS", "TASK_LABEL", "SPLITS", "PROFILES", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE",
            "DEFAULT_WIDTH", "SMALL", "check_names"]
 
 #: The DENALI benchmark models.
 MODEL_NAMES: tuple[str, ...] = ("mlp", "cnn1d", "cnn3d", "transformer")
+#: How reports name them, with the article a sentence needs ("met with an MLP trained on ...").
+MODEL_LABELS = {"mlp": ("an", "MLP"), "cnn1d": ("a", "1D CNN"), "cnn3d": ("a", "3D CNN"),
+                "transformer": ("a", "Transformer")}
 #: Task names: localization, 30-way shape classification, 2-way size classification.
 TASKS: tuple[str, ...] = ("loc", "shape", "size")
 #: Label column each classification task predicts.
@@ -23,6 +27,12 @@ DEFAULT_PATIENCE = 5
 DEFAULT_WIDTH = 0.25
 #: Settings of the "small" run CI can afford (a few minutes on 2 CPU cores at DENALI's size).
 SMALL = {"epochs": 5, "width": 0.125}
+
+
+def model_phrase(name: str) -> str:
+    """``"an MLP"``, ``"a 1D CNN"``: a model as a sentence names it (an unknown name as it is, with "a")."""
+    article, label = MODEL_LABELS.get(name, ("a", name))
+    return f"{article} {label}"
 
 
 def check_names(kind: str, given, allowed) -> list[str]:

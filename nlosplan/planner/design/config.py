@@ -22,6 +22,9 @@ keeps the default of the chosen mode)::
     models = ["mlp", "cnn1d"]    # candidate learners (--models); the best per task is used
     max_seeds = 8                # most seeds of an undecided candidate
     budget = 30                  # extra evaluations to decide undecided candidates
+    [search.fidelity.trained]
+    train_captures = 25200       # training captures of each learner (--train-captures; default one per
+                                 # training scene: 2,100 here, 700 with --quick)
 
     [scenes]                     # SceneSet: simulated scenes of the evaluators
     positions_stride = 2
@@ -45,6 +48,7 @@ from pathlib import Path
 from nlosplan.errors import UserError, check_keys
 from nlosplan.schema import (NUMBER, STRING, Spec, check_types, int_in, list_of, load_table, number_in, one_of,
                              pair_of, predicate, quantity, table_of)
+from nlosplan.planner.design.budget import MAX_TRAIN_CAPTURES, TRAIN_CAPTURES
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
@@ -101,7 +105,7 @@ def _schema() -> dict:
                    "candidates": int_in(1, 100), "optimize_evals": int_in(1, 10_000), "fidelity": table_of()},
         "bound": {"draws": count, "looks": count, "crlb_repeats": count},
         "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
-                    "bootstrap": int_in(0)},
+                    "bootstrap": int_in(0), TRAIN_CAPTURES: int_in(2, MAX_TRAIN_CAPTURES)},
         "scenes": {"objects": objects, "sizes": list_of(one_of(*SIZES), min_len=1),
                    "positions": list_of(int_in(0, 99), min_len=1), "positions_stride": int_in(1, 99),
                    "lights": one_of("off", "on"), "repeats": count, "crlb_objects": objects, "crlb_stride": count,

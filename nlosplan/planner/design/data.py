@@ -178,16 +178,29 @@ class ReferenceData:
             raise UserError("real captures have no expected counts; the bounds use the simulated reference")
         return degrade_expected(self.means, d)
 
-    def design_mean_capture(self, d: Degradation, rng, repeats: int) -> np.ndarray:
+    def design_mean_capture(self, d: Degradation, rng, repeats: int, rows=None) -> np.ndarray:
         """The mean of ``repeats`` noisy captures of the design, (N, R', C', B') float64 (real: the capture rows).
 
         Simulated: the reference sensor's :meth:`~nlosplan.sensor_models.noise.CaptureNoise.mean_of_repeats` of the
         design's expected counts.
+
+        Parameters
+        ----------
+        d : Degradation
+        rng : numpy.random.Generator or seed
+        repeats : int
+            Captures averaged into one.
+        rows : ndarray of int, shape (M,), optional
+            Only these scenes (repeated indices draw a scene again, independently): (M, R', C', B'). Simulated
+            references only: real captures cannot be drawn again.
         """
         rng = np.random.default_rng(rng)
         if self.means is None:
+            if rows is not None:
+                raise UserError("real captures cannot be drawn again: a capture is what was captured")
             return degrade_counts(self.counts, d, rng).astype(np.float64)
-        return CaptureNoise.of(self.sensor).mean_of_repeats(rng, degrade_expected(self.means, d), repeats)
+        means = self.means if rows is None else self.means[np.asarray(rows, dtype=np.int64)]
+        return CaptureNoise.of(self.sensor).mean_of_repeats(rng, degrade_expected(means, d), repeats)
 
     def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:
         """``(lam, jac)`` of the localization-bound scenes under the design."""

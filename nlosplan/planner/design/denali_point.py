@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 
+from nlosplan.planner.design.budget import TRAIN_NOTE
 from nlosplan.planner.design.evaluation import Evaluator
 from nlosplan.planner.design.evidence import Evidence
 from nlosplan.planner.design.requirements import Requirement
@@ -95,7 +96,8 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
     learner : str
         The task's learner (``mlp``, ``cnn1d``, ...).
     train_captures : int or None
-        Training rows a run of the learner used (each the mean of the trained evaluator's ``repeats`` captures).
+        Training captures a run of the learner had (its ``extra["n_train"]``, the early-stopping share included;
+        :mod:`~nlosplan.planner.design.budget`).
     bound : (value, lo, hi) or None
         The task's bound at the design (metres or a fraction; an infinite Cramér–Rao bound is None).
     real : float or None
@@ -187,8 +189,8 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     -------
     list of dict
         :func:`point_row`'s fields, plus ``denali_cost`` (the reference design's cost), ``denali_design``
-        (whether the reference is DENALI's geometry: where it is not, ``real_verdict`` and ``agrees`` are None)
-        and ``answer_note``.
+        (whether the reference is DENALI's geometry: where it is not, ``real_verdict`` and ``agrees`` are None),
+        ``answer_note`` and ``train_note`` (why a run had fewer training captures than asked; empty otherwise).
     """
     base, space = evidence.base, evidence.space
     denali = is_denali_design(base, space.sensor)
@@ -197,6 +199,7 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     for req, answer in zip(evidence.requirements, cheapest):
         runs = evidence.runs(req, base)
         n_train = sorted({int(n) for n in (r.extra.get("n_train") for r in runs if r.finite) if n is not None})
+        notes = sorted({str(n) for n in (r.extra.get(TRAIN_NOTE) for r in runs if r.finite) if n})
         b = evidence.bound(req, base)
         real, source = real_figure(req)
         if not denali:
@@ -214,7 +217,8 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
                 terms = evidence.cost_model.terms(d, space)
                 finer = [k.replace("_", " ") for k in terms if terms[k] > base_terms[k] + 1e-9]
         note = answer_note(req, a_verdict, a_cost, evidence.cost(base), real, finer) if denali else ""
-        rows.append({**row, "denali_design": denali, "denali_cost": evidence.cost(base), "answer_note": note})
+        rows.append({**row, "denali_design": denali, "denali_cost": evidence.cost(base), "answer_note": note,
+                     TRAIN_NOTE: "; ".join(notes)})
     return rows
 
 

@@ -26,8 +26,12 @@ Evaluators
     A benchmark model (``fidelity["model"]``: the run's best learner of the
     task) trained on noisy captures of the design (repeats averaged), random
     70/30 split by scene, metric on the test scenes; interval by bootstrap
-    over the test scenes. The seed draws the Poisson noise, the split and the
-    training (a re-run at another seed changes all three). The split,
+    over the test scenes. ``fidelity["train_captures"]`` (the training
+    budget, :mod:`~nlosplan.planner.design.budget`) sets how many training
+    captures the learner gets: a subset of one per training scene, or more
+    noisy captures of them drawn; without it, one per training scene. The
+    seed draws the Poisson noise, the split and the training (a re-run at
+    another seed changes all three). The split,
     targets, training settings and training are the benchmark's
     (:func:`~nlosplan.tasks.benchmark.task_data`,
     :func:`~nlosplan.tasks.benchmark.train_config`,
@@ -44,6 +48,7 @@ import time
 
 import numpy as np
 
+from nlosplan.planner.design.budget import TRAIN_CAPTURES, TRAIN_NOTE, requested, training_set
 from nlosplan.planner.design.data import load_reference
 from nlosplan.planner.design.evaluation import Evaluator, Status
 from nlosplan.planner.design.jobs import DesignJob
@@ -132,10 +137,14 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     labels["zones"] = f"{hist.shape[1]}x{hist.shape[2]}"
     labels["repeat"] = -1
     labels["source"] = ref.source
-    return trained_metric(Dataset(hist, labels, deg.bin_width_ps), task, fid, seed, condition)
+    more = None
+    if not ref.is_counts:  # more noisy captures of training scenes, each from its own stream (a budget above one each)
+        extra_rng = np.random.default_rng([seed, 8])
+        more = lambda rows: ref.design_mean_capture(deg, extra_rng, int(fid["repeats"]), rows=rows)  # noqa: E731
+    return trained_metric(Dataset(hist, labels, deg.bin_width_ps), task, fid, seed, condition, more=more)
 
 
-def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | None = None
+def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | None = None, *, more=None
                    ) -> tuple[float, tuple[float, float], dict]:
     """Train ``fid["model"]`` on ``ds`` as the benchmark does and score the test rows.
 
@@ -145,19 +154,25 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
         One row per scene (repeats already averaged).
     task : {"loc", "shape", "size"}
     fid : dict
-        ``model``, ``epochs``, ``width``, ``bootstrap`` (draws of the interval).
+        ``model``, ``epochs``, ``width``, ``bootstrap`` (draws of the interval); ``train_captures`` (optional:
+        the training budget, :mod:`~nlosplan.planner.design.budget`).
     seed : int
         Seed of the split and the training (:func:`~nlosplan.tasks.benchmark.run_benchmark`'s ``seed``).
     condition : Condition, optional
         The test rows the metric is computed on.
+    more : callable, optional
+        ``more(rows)``: fresh noisy captures of rows of ``ds`` (a budget above one capture per training scene
+        draws them; see :func:`~nlosplan.planner.design.budget.training_set`).
 
     Returns
     -------
     value, (lo, hi), extra
         ``loc_rmse`` (m) or ``top1_acc`` on the test rows, its bootstrap 95 % interval, and details
-        (``epochs``, ``n_train``, ``n_test``, ``train_seconds``; ``loc_rms_distance`` for localization).
-        The value equals the benchmark table's overall ``loc_rmse`` / ``top1_acc`` of the same model,
-        data, seed, epochs and width.
+        (``epochs``, ``train_captures`` (asked; None: the default), ``n_train`` (training captures, the
+        learner's early-stopping share included), ``n_fit``, ``n_val``, ``n_test``, ``train_seconds``;
+        ``train_note`` where ``n_train`` is less than asked; ``loc_rms_distance`` for localization). Without
+        ``train_captures`` the value equals the benchmark table's overall ``loc_rmse`` / ``top1_acc`` of the
+        same model, data, seed, epochs and width.
     """
     from nlosplan.tasks.benchmark import task_classes, task_data, train_config
     from nlosplan.tasks.metrics import loc_rms_distance, loc_rmse, top1_accuracy
@@ -165,9 +180,11 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
 
     classes = task_classes(ds, task)
     data = task_data(ds, task, "random", seed=seed, classes=classes)
+    asked = requested(fid)
+    x, y, note = training_set(data.train.histograms, data.y_train, asked, seed=seed, stratify=task != Task.LOC,
+                              more=None if more is None else (lambda rows: more(data.split.train[rows])))
     cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
-    model = train_model(data.train.histograms, data.y_train, model=fid["model"], task=task, config=cfg,
-                        width=float(fid["width"]), classes=classes)
+    model = train_model(x, y, model=fid["model"], task=task, config=cfg, width=float(fid["width"]), classes=classes)
     keep = _rows(data.test.labels, condition)
     scores, truth = model.predict(data.test.histograms)[keep], data.y_test[keep]
     score = loc_rmse if task == Task.LOC else top1_accuracy
@@ -177,8 +194,11 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
         return math.nan, (math.nan, math.nan), {}
     value = stat(np.arange(n))
     lo, hi = _bootstrap(stat, n, int(fid["bootstrap"]), seed)
-    extra = {"model": fid["model"], "epochs": len(model.history), "n_train": int(model.n_train), "n_test": n,
+    extra = {"model": fid["model"], "epochs": len(model.history), TRAIN_CAPTURES: asked, "n_train": len(x),
+             "n_fit": int(model.n_train), "n_val": int(model.n_val), "n_test": n,
              "train_seconds": float(model.train_seconds)}
+    if note:
+        extra[TRAIN_NOTE] = note
     if task == Task.LOC:
         extra["loc_rms_distance"] = loc_rms_distance(scores, truth)
     return value, (lo, hi), extra

@@ -28,11 +28,13 @@ from nlosplan.data.load import check_captures, load_dataset
 from nlosplan.errors import UserError
 from nlosplan.files import write_bytes, write_text, writing
 from nlosplan.planner.design import reference_cache, robust
+from nlosplan.planner.design.budget import (budget_statement, check_budget_memory, check_real_budget,
+                                            default_captures, real_capacity, requested)
 from nlosplan.planner.design.catalog import keep as stability_keep
 from nlosplan.planner.design.catalog import kept_summary, run_catalog, stability_summary
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.data import SceneSet, build_reference, reference_from_dataset
-from nlosplan.planner.design.evaluation import Evaluation
+from nlosplan.planner.design.evaluation import Evaluation, Evaluator
 from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.evidence import Candidate
 from nlosplan.planner.design.executors import make_executor
@@ -366,18 +368,24 @@ def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
         path = real_reference_path(out, cfg.real)
         ref.save(path)
         real = {layout: path for layout in sims}  # unreachable layouts are reported per evaluation
-        info["real"] = {"captures": int(len(ds)), "source": str(cfg.real), "sensor": captured.name}
+        info["real"] = {"captures": int(len(ds)), "source": str(cfg.real), "sensor": captured.name,
+                        "training_captures": real_capacity(ds.labels).captures}
     return sims, real, info, stability
 
 
-def check_inputs(cfg: DesignConfig) -> None:
-    """What a run needs from outside, checked before any work: the real captures' store and sensor (one line each)."""
+def check_inputs(cfg: DesignConfig, workers: int | None = None) -> None:
+    """What a run needs from outside, checked before any work: the real captures' store and sensor, that they hold
+    the training captures asked for, and memory for the learners' training sets (one line each)."""
+    budget = requested(cfg.search.fidelity[Evaluator.TRAINED.knobs])
+    cells = max(r * c for r, c in cfg.space.zones) * cfg.space.sensor.n_bins
+    check_budget_memory(budget, cells, workers or os.cpu_count() or 1)
     if cfg.real:
         captured = resolve_sensor(cfg.capture_sensor or cfg.space.reference)
         zones = f"{captured.zones_rows}x{captured.zones_cols}"
-        check_captures(cfg.real, {**(cfg.real_where or {}), "zones": zones}, drop_backgrounds=True,
-                       zones_hint="the real captures must have the capture sensor's zones (give the matching "
-                                  "--capture-sensor)")
+        where = check_captures(cfg.real, {**(cfg.real_where or {}), "zones": zones}, drop_backgrounds=True,
+                               zones_hint="the real captures must have the capture sensor's zones (give the matching "
+                                          "--capture-sensor)")
+        check_real_budget(budget, cfg.real, where)
 
 
 def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | None = None,
@@ -423,7 +431,7 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
     t0 = time.perf_counter()
     out = Path(out)
     say = (lambda text, done=None, total=None: progress(text, done, total)) if progress else (lambda *a, **k: None)
-    check_inputs(cfg)
+    check_inputs(cfg, workers)
     worlds = None if cfg.real else _world_plan(cfg)  # a bad calibration uncertainty stops the run before any work
     out.mkdir(parents=True, exist_ok=True)
     ckpt = _Checkpoint(out / CHECKPOINT, cfg, resume, overwrite=overwrite, repair=repair,
@@ -495,8 +503,18 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         stability = stability_summary(quick, cache, say)
     say("summary: writing")
     result = summarize(search.evidence)
-    result["_refs"] = ref_info
+    result.update(_refs=ref_info, train_captures=_budget(cfg, search.evidence, ref_info))
     return result, stability
+
+
+def _budget(cfg: DesignConfig, evidence, ref_info: dict) -> dict:
+    """The run's training budget and learner family (:func:`~nlosplan.planner.design.budget.budget_statement`)."""
+    fid = cfg.search.fidelity[Evaluator.TRAINED.knobs]
+    real = ref_info.get("real")
+    default = real["training_captures"] if real else default_captures(cfg.scenes.n_scenes)
+    learners = {str(r.task): evidence.learner(r.task) for r in evidence.task_requirements()}
+    return budget_statement(requested(fid), default=default, learners=learners, models=cfg.search.models,
+                            epochs=int(fid["epochs"]), repeats=int(fid["repeats"]), real=bool(cfg.real))
 
 
 def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from nlosplan.errors import UserError
+from nlosplan.planner.design.budget import TRAIN_CAPTURES, check_captures_value
+from nlosplan.planner.design.evaluation import Evaluator
 from nlosplan.planner.design.evaluators import DEFAULT_FIDELITY
 from nlosplan.resources import MAX_DESIGN_SEED as MAX_SEED
 
@@ -71,6 +73,9 @@ class SearchConfig:
                 self.seeds <= self.max_seeds <= SEED_STRIDE // 10:
             raise UserError(f"[search] max_seeds={self.max_seeds!r} must be a whole number from seeds "
                             f"({self.seeds}) to {SEED_STRIDE // 10}")
+        budget = self.fidelity.get(Evaluator.TRAINED.knobs, {}).get(TRAIN_CAPTURES)
+        if budget is not None:
+            check_captures_value(budget, f"[search.fidelity.trained] {TRAIN_CAPTURES}")
         models = (self.models,) if isinstance(self.models, str) else tuple(self.models)
         object.__setattr__(self, "models", tuple(check_names("model(s)", models, MODEL_NAMES)))
 
