@@ -45,7 +45,7 @@ demo: setup
 # TEST_WORKERS processes (pytest-xdist; default one per core), a test file per worker.
 TEST_WORKERS ?= auto
 test: setup
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(if $(or $(CI),$(SLOW)),,-m "not slow")
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=30 $(if $(or $(CI),$(SLOW)),,-m "not slow")
 
 check: setup
 	$(BIN)/nlosplan check

@@ -49,7 +49,7 @@ def _means(out):
     return load_reference(path).means
 
 
-@pytest.mark.slow  # three design runs (~2.5 min on 2 shared cores); the damaged-entry test covers reuse fast
+@pytest.mark.slow  # two design runs and the start of a third (~2 min on 2 shared cores); the damaged-entry test covers reuse fast
 def test_second_run_takes_the_references_from_the_cache(counted, tmp_path):
     run_design(tiny(), tmp_path / "a", workers=1)
     n = len(counted)
@@ -58,9 +58,21 @@ def test_second_run_takes_the_references_from_the_cache(counted, tmp_path):
     assert len(counted) == n, "the second run simulated references again"
     np.testing.assert_array_equal(_means(tmp_path / "a"), _means(tmp_path / "b"))
     assert _values(tmp_path / "a") == _values(tmp_path / "b")
-    # --no-cache simulates again
-    run_design(tiny(), tmp_path / "c", workers=1, cache=False)
-    assert len(counted) == 2 * n
+    # --no-cache simulates again (stopped at its first reference: the rest of the run is the runs' above)
+    real = design_data.simulate_reference
+
+    def first_then_stop(sensor, scenes, **kw):
+        real(sensor, scenes, **kw)
+        raise _Stop
+
+    design_data.simulate_reference = first_then_stop
+    with pytest.raises(RuntimeError, match="reference failed: _Stop"):   # the run names the failed reference
+        run_design(tiny(), tmp_path / "c", workers=1, cache=False)
+    assert len(counted) == n + 1
+
+
+class _Stop(Exception):
+    """Ends a design run once it has simulated a reference."""
 
 
 def test_damaged_entry_is_recomputed_with_a_note(counted, tmp_path):

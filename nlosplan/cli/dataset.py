@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from contextlib import contextmanager
 
-from nlosplan.cli.common import command_group, emit, int_type, note, progress_bar, seed_type, sub_parser
+from nlosplan.cli.common import command_group, emit, int_type, note, number_type, progress_bar, seed_type, sub_parser
 from nlosplan.cli.selections import choice_list, fidelity_level, object_list, position_list
 from nlosplan.errors import UserError
 
@@ -64,10 +64,11 @@ def _cmd_build(args) -> int:
     from nlosplan.files import writing
     from nlosplan.sensor_models import resolve_sensor
 
-    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options, session_floor_sd
 
     sensor = resolve_sensor(args.sensor)
     options = scene_options(scene_model(args.sensor))  # a calibrated sensor's fitted scene (albedo, base, mount)
+    sessions = session_floor_sd(scene_model(args.sensor)) if args.session_floor_sd is None else args.session_floor_sd
     _check_store_target(args.store)
     _check_build_size(args, sensor)
     n = len(args.objects) * len(args.sizes) * len(args.positions) * len(args.lights) * args.repeats
@@ -79,14 +80,15 @@ def _cmd_build(args) -> int:
             build_dataset, store, scene=args.scene, sensor=sensor, objects=args.objects, sizes=args.sizes,
             positions=args.positions, lights=args.lights, repeats=args.repeats, fidelity=args.fidelity,
             seed=args.seed, reflectance=args.reflectance, scene_options=options, batch=args.batch,
-            progress=progress)
+            progress=progress, session_floor_sd=sessions)
     res["warnings"] = warned
     text = (f"stored {res['captures_added']} new captures in {res['store']} ({res['captures_skipped']} of "
             f"{res['captures_total']} were there already; {res['groups_skipped']} of {res['groups']} groups "
             "were complete)\n"
             f"{len(res['objects'])} objects x {len(res['sizes'])} sizes x {len(res['positions'])} positions x "
             f"{len(res['lights'])} lights x {res['repeats']} repeats, {res['sensor']} ({res['zones']}), fidelity "
-            f"{args.fidelity}, seed {res['seed']}, in {res['seconds']:.1f} s ({res['captures_per_second']:.1f} "
+            f"{args.fidelity}, seed {res['seed']}, session floor spread {100 * res['session_floor_sd']:.2f} %, "
+            f"in {res['seconds']:.1f} s ({res['captures_per_second']:.1f} "
             f"captures/s; simulation {res['simulate_seconds']:.1f} s, store {res['store_seconds']:.1f} s)")
     emit(args, res, text)
     return 0
@@ -233,6 +235,11 @@ def add(sub) -> None:
     b.add_argument("--batch", type=int_type(1), default=100, help="positions per run (default: 100): the positions are cut into runs of N and "
                    "every object and lighting of a run is simulated together, up to 1,200 scenes per call; keep it "
                    "when resuming (it fixes the float32 rounding of the means)")
+    b.add_argument("--session-floor-sd", type=number_type(float, zero_ok=True, hi=0.5), default=None, metavar="F",
+                   help="spread of the floor between capture sessions, a fraction of the floor: every capture of one "
+                        "object, size and lighting (one DENALI folder, recorded in one sitting) has its floor moved "
+                        "by the same draw (default: the sensor's scene model: 0.0173 for DENALI's unit, from its "
+                        "Table-2 fit's background offsets; 0 for other sensors; 0 turns it off)")
     b.add_argument("--fsync", action="store_true",
                    help="fsync every commit (survives power cuts; a build resumes identically anyway)")
     b.add_argument("--json", action="store_true", help="machine-readable summary")

@@ -48,13 +48,14 @@ from nlosplan._jax import jax, jnp
 from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES, class_group, positions_xy
 from nlosplan.errors import UserError
 from nlosplan.sensor_models.config import SensorConfig
-from nlosplan.sensor_models.noise import CaptureNoise
+from nlosplan.sensor_models.noise import CaptureNoise, floor_counts
 from nlosplan.simulators.presets.denali import denali_scene
 from nlosplan.simulators.scene import NLOSWarning
 from nlosplan.data.denali_io import OBJECT_ALIASES
 from nlosplan.data.records import capture_key, sensor_hash, zones_of
 
-__all__ = ["SCENES", "SCENES_PER_SIMULATION", "SOURCE", "build_dataset", "draw_captures", "scene_seed"]
+__all__ = ["MAX_SESSION_FLOOR_SD", "SCENES", "SCENES_PER_SIMULATION", "SOURCE", "build_dataset", "draw_captures",
+           "scene_seed", "session_shift"]
 
 #: Scenes a dataset can be built from.
 SCENES = ("denali",)
@@ -72,6 +73,24 @@ def scene_seed(seed: int, obj: str, size: str, position: int, lights: str) -> in
     """The noise seed of one scene, from the build seed and its labels alone (0 to 2**63 - 1)."""
     text = f"nlosplan-build|{int(seed)}|{obj}|{size}|{int(position)}|{lights}"
     return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little") >> 1
+
+
+#: Largest session floor spread a build takes (a fraction of the floor).
+MAX_SESSION_FLOOR_SD = 0.5
+
+
+def session_shift(seed: int, obj: str, size: str, lights: str, sd: float) -> float:
+    """How far one capture session's floor sits from the sensor's, a fraction of the floor.
+
+    A session is one object, size and lighting (DENALI records each such folder, every position and repeat of
+    it, in one sitting): its floor is ``(1 + shift)`` times the sensor's for all its captures, ``shift = sd * z``
+    with ``z`` standard normal drawn from the build seed and the session's labels alone (0 when ``sd`` is 0).
+    """
+    if sd == 0:
+        return 0.0
+    text = f"nlosplan-session|{int(seed)}|{obj}|{size}|{lights}"
+    rng = np.random.default_rng(int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little"))
+    return float(sd * rng.standard_normal())
 
 
 @partial(jax.jit, static_argnums=(2, 3))
@@ -136,7 +155,7 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
                   sizes: Sequence[str] = SIZES, positions: Sequence[int] = range(N_POSITIONS),
                   lights: Sequence[str] = ("off",), repeats: int = 3, fidelity="default", seed: int = 0,
                   reflectance: str = "retroreflective", scene_options: dict | None = None,
-                  progress: Progress | None = None, batch: int = N_POSITIONS) -> dict:
+                  progress: Progress | None = None, batch: int = N_POSITIONS, session_floor_sd: float = 0.0) -> dict:
     """Simulate DENALI captures into a store, resumably.
 
     Parameters
@@ -167,6 +186,12 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
     batch : int
         Positions per run (fixes the simulations, see the module notes); a simulation holds at most
         :data:`SCENES_PER_SIMULATION` scenes (memory).
+    session_floor_sd : float
+        Spread of the floor between capture sessions, a fraction of the floor (0 to
+        :data:`MAX_SESSION_FLOOR_SD`): every capture of one object, size and lighting has its floor moved by
+        the same :func:`session_shift`. 0 (the default here): every session has the sensor's floor. The
+        command line's default is the scene model's (:func:`~nlosplan.simulators.presets.scene_model.session_floor_sd`:
+        1.73 % for DENALI's unit).
 
     Returns
     -------
@@ -176,7 +201,7 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
         ``store_seconds``, ``captures_per_second`` (added / seconds), ``simulations`` and
         ``scenes_simulated`` (simulator calls and their scenes), ``scenes_per_second`` (simulated
         scenes / ``simulate_seconds``, scene construction and Poisson draws included), the
-        sensor, its hash and zones, ``fidelity`` knobs, ``seed``, ``variant``
+        sensor, its hash and zones, ``fidelity`` knobs, ``seed``, ``variant``, ``session_floor_sd``
         and the simulator ``warnings``.
 
     Examples
@@ -201,10 +226,17 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
         raise UserError(f"batch={batch!r} must be an integer >= 1")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise UserError(f"seed={seed!r} must be an integer >= 0")
+    sd = session_floor_sd
+    if isinstance(sd, bool) or not isinstance(sd, (int, float, np.floating)) or not 0 <= sd <= MAX_SESSION_FLOOR_SD:
+        raise UserError(f"session_floor_sd={sd!r} must be a number from 0 to {MAX_SESSION_FLOOR_SD:g} (a fraction "
+                        "of the floor)")
+    sd = float(sd)
     knobs = resolve_fidelity(fidelity).to_dict()
     options = {"reflectance": reflectance, **(scene_options or {})}
     denali_scene(objects[0], sizes[0], positions[0], lights[0], **options)  # check the options before any work
     variant_doc = {"scene": scene, "backend": "fast", "dtype": "float32", "options": options, "fidelity": knobs}
+    if sd:   # captures with a session floor are another variant (without one, the variant of before)
+        variant_doc["session_floor_sd"] = sd
     variant = hashlib.sha256(json.dumps(variant_doc, sort_keys=True).encode()).hexdigest()[:12]
     h, zones, xy = sensor_hash(sensor), zones_of(sensor), positions_xy()
     fidelity_label = fidelity if isinstance(fidelity, str) else json.dumps(knobs, sort_keys=True)
@@ -265,12 +297,16 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
                     t0 = time.perf_counter()
                     seeds = [scene_seed(seed, obj, size, p, light) for p in chunk]
                     rows = slice(i * len(chunk), (i + 1) * len(chunk))
-                    counts = draw_captures(sim.expected[rows], seeds, repeats, sensor)
+                    shift = session_shift(seed, obj, size, light, sd)
+                    means = sim.expected[rows]
+                    if shift:
+                        means = np.maximum(np.asarray(means) + shift * floor_counts(sensor, light == "on"), 0.0)
+                    counts = draw_captures(means, seeds, repeats, sensor)
                     t1 = time.perf_counter()
                     index = {p: j for j, p in enumerate(chunk)}
                     items = [(counts[index[p], r], labels(obj, size, light, p, r),
                               {"scene_meta": scenes[rows][index[p]].meta, "scene_seed": seeds[index[p]],
-                               "fidelity_knobs": knobs, "simulator": sim_meta})
+                               "fidelity_knobs": knobs, "simulator": sim_meta, "session_floor_shift": shift})
                              for p, r in missing]
                     added += store.put_many(items, sensor=sensor).added
                     t_sim, t_store = t_sim + t1 - t0, t_store + time.perf_counter() - t1
@@ -283,6 +319,7 @@ def build_dataset(store, *, scene: str = "denali", sensor, objects: Sequence[str
     return {"store": str(store.path), "scene": scene, "sensor": sensor.name, "sensor_hash": h, "zones": zones,
             "objects": objects, "sizes": sizes, "positions": positions, "lights": lights, "repeats": int(repeats),
             "fidelity": knobs, "seed": int(seed), "variant": variant, "scene_options": options,
+            "session_floor_sd": sd,
             "groups": len(objects) * len(sizes) * len(lights), "groups_skipped": groups_skipped,
             "captures_total": total, "captures_added": added, "captures_skipped": skipped, "seconds": seconds,
             "simulate_seconds": t_sim, "store_seconds": t_store, "simulations": n_sims, "scenes_simulated": n_scenes,

@@ -100,7 +100,8 @@ def _denali(sensor, zones: str) -> list[RealSource]:
                          "centre zone's three-bounce signal, lights on/off x 4-inch/8-inch objects, and their 4 "
                          "ratios, with DENALI's processing (repeat means minus the 8-inch NOOBJECT background, bins "
                          f"< 70 zeroed, clip at 0){carried}"),
-                   parameters=fitted, scene={"albedo": d.DENALI_SCENE_FIT["albedo"], **d.denali_nuisances(zones)},
+                   parameters=fitted, scene={"albedo": d.DENALI_SCENE_FIT["albedo"], **d.denali_nuisances(zones),
+                                             "session_floor_sd": d.DENALI_SESSION_FLOOR_SD},
                    held={"ambient_rate_hz": sensor.ambient_rate_hz,
                          **{k: d.DENALI_SCENE_FIT[k] for k in ("diffuse_albedo", "mount_albedo",
                                                                "mount_in_background")}}),

@@ -51,6 +51,17 @@ DENALI_NUISANCES_FIT: dict = {
 }
 
 
+#: Spread (standard deviation, fraction of the floor) of the floor from one capture session to the next: the rms of
+#: the Table-2 fit's two background offsets (:data:`DENALI_NUISANCES_FIT`: DENALI's no-object background captures,
+#: recorded in their own sessions, sit 2.3 % above the object captures' floor with the lights on and 0.7 % below with
+#: them off), sqrt((0.02349**2 + 0.00695**2) / 2) = 1.73 %. DENALI records every folder (one object, size and
+#: lighting: 100 positions x 3 repeats) in one session, so each folder's floor is its own draw
+#: (``dataset build --session-floor-sd``, :func:`nlosplan.data.build.session_shift`). Two offsets make a rough
+#: estimate; docs/tasks.md gives what the term does to a learner under DENALI's split.
+DENALI_SESSION_FLOOR_SD: float = round(((DENALI_NUISANCES_FIT["background_offset_on"] ** 2
+                                         + DENALI_NUISANCES_FIT["background_offset_off"] ** 2) / 2) ** 0.5, 5)
+
+
 def denali_nuisances(zones: str) -> dict:
     """The Table-2 fit's protocol nuisances for a zone mode: the 3x3 fit's, with the early residual (counts per
     capture) scaled by the iterations (8x8: 10,240 / 10,240,000), the background offsets (fractions of the floor)

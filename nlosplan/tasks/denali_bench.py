@@ -177,11 +177,12 @@ def load_protocol_captures(sensor_spec, protocol: Protocol, *, store=None, fidel
     from nlosplan.data.build import build_dataset
     from nlosplan.data.store import CaptureStore
     from nlosplan.sensor_models import resolve_sensor
-    from nlosplan.simulators.presets.scene_model import scene_model, scene_options
+    from nlosplan.simulators.presets.scene_model import scene_model, scene_options, session_floor_sd
     from nlosplan.tasks.denali_protocol import capture_order
 
     sensor = resolve_sensor(sensor_spec)
     options = scene_options(scene_model(sensor_spec))
+    sessions = session_floor_sd(scene_model(sensor_spec))
     path = Path(store) if store is not None else default_store(sensor, options, protocol, fidelity)
     path.parent.mkdir(parents=True, exist_ok=True)
     if progress is not None:
@@ -195,7 +196,8 @@ def load_protocol_captures(sensor_spec, protocol: Protocol, *, store=None, fidel
     with CaptureStore(path, synchronous="NORMAL") as st:
         res = build_dataset(st, sensor=sensor, objects=protocol.objects, sizes=protocol.sizes,
                             positions=protocol.positions, lights=protocol.lights, repeats=protocol.repeats,
-                            fidelity=fidelity, seed=BUILD_SEED, scene_options=options, progress=built)
+                            fidelity=fidelity, seed=BUILD_SEED, scene_options=options, progress=built,
+                            session_floor_sd=sessions)
         ds = st.load(source="sim:fast", sensor_hash=res["sensor_hash"], seed=BUILD_SEED, variant=res["variant"],
                      object=list(protocol.objects), size=list(protocol.sizes), position=list(protocol.positions),
                      lights=list(protocol.lights), repeat=list(range(protocol.repeats)))
@@ -205,7 +207,7 @@ def load_protocol_captures(sensor_spec, protocol: Protocol, *, store=None, fidel
     order = capture_order(ds.labels)
     info = {"store": str(path), "sensor": sensor.name, "scene_options": options, "captures": len(ds),
             "captures_added": res["captures_added"], "build_seconds": res["seconds"], "variant": res["variant"],
-            "fidelity": fidelity, "build_seed": BUILD_SEED}
+            "fidelity": fidelity, "build_seed": BUILD_SEED, "session_floor_sd": sessions}
     return ds.histograms[order], ds.labels.iloc[order].reset_index(drop=True), info
 
 

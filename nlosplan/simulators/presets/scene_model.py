@@ -27,7 +27,7 @@ True
 from __future__ import annotations
 
 __all__ = ["DEFAULT_SENSOR", "DEFAULT_SENSOR_8X8", "CALIBRATED_SCENE_MODELS", "scene_model", "scene_options",
-           "describe_scene_options"]
+           "describe_scene_options", "session_floor_sd"]
 
 #: The sensor model used when none is given (DENALI's unit, calibrated on Table 2).
 DEFAULT_SENSOR = "denali-tmf8828-3x3"
@@ -69,6 +69,20 @@ def scene_options(model: str) -> dict:
     from nlosplan.sensor_models.presets_denali import DENALI_SCENE_FIT
 
     return dict(DENALI_SCENE_FIT)
+
+
+def session_floor_sd(model: str) -> float:
+    """How much the floor moves from one capture session to the next (standard deviation, fraction of the floor).
+
+    A DENALI scene model: :data:`~nlosplan.sensor_models.presets_denali.DENALI_SESSION_FLOOR_SD` (1.73 %, from the
+    Table-2 fit's background offsets); none (``""``): 0, every session has the sensor's floor.
+    """
+    if not model:
+        return 0.0
+    scene_options(model)   # an unknown model is refused there
+    from nlosplan.sensor_models.presets_denali import DENALI_SESSION_FLOOR_SD
+
+    return float(DENALI_SESSION_FLOOR_SD)
 
 
 def describe_scene_options(options: dict) -> str:
