@@ -41,6 +41,7 @@ def run(tmp_path_factory):
     return result, text, plot, steps
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_json_has_the_required_keys_and_types(run):
     result, _, _, steps = run
     assert {"levels", "reference", "pruning", "arithmetic", "machine", "config"} <= set(result)
@@ -68,6 +69,7 @@ def test_json_has_the_required_keys_and_types(run):
     json.dumps(result, allow_nan=False)  # strict JSON: no NaN or infinity
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_errors_are_finite_and_reflect_the_levels(run):
     result, _, _, _ = run
     ref = result["reference"]
@@ -80,6 +82,7 @@ def test_errors_are_finite_and_reflect_the_levels(run):
         assert r["rel_l1_error"] > ref["reference_self_error"]
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_scene_models_are_timed_and_scored_in_the_same_run(run):
     result = run[0]
     rows = {r["model"]: r for r in result["models"]}
@@ -112,6 +115,7 @@ def test_unknown_scene_model_is_rejected():
         bench.bench_simulate(levels=("draft",), positions=range(3), reference_positions=(0,), models=("glossy",))
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_pruned_equals_unpruned_and_does_less(run):
     pr = run[0]["pruning"]
     assert pr["pruned_vs_full_max_rel_diff_counts"] < 1e-5
@@ -121,6 +125,7 @@ def test_pruned_equals_unpruned_and_does_less(run):
         assert math.isfinite(pr[k]) and pr[k] > 0
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_arithmetic_estimate(run):
     ar = run[0]["arithmetic"]
     assert ar["flops_per_scene"] == pytest.approx(sum(ar["flops_breakdown"].values()))
@@ -128,12 +133,14 @@ def test_arithmetic_estimate(run):
     assert ar["achieved_gflops"] > 0 and ar["matmul_peak"]["gflops"] > 0 and ar["fraction_of_peak"] > 0
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_plot_is_a_png(run):
     result, text, plot, _ = run
     assert plot.is_file() and plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert result["plot"] == str(plot) and str(plot) in text
 
 
+@pytest.mark.slow  # one bench simulate run shared by the module (~2 min); CI runs it
 def test_text_names_every_level_and_the_verdict(run):
     _, text, _, _ = run
     for name in LEVELS:

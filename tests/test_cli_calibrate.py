@@ -25,6 +25,7 @@ def shared_data_module():
     return path
 
 
+@pytest.mark.slow  # a full real-data fit (~85 s); CI runs it
 def test_calibrate_real_data_with_holdout(real, capsys):
     data, folder = real
     out = folder / "cal.toml"

@@ -311,6 +311,7 @@ def two_seed_config(seed: int) -> DesignConfig:
         worlds=WorldsConfig(count=2, scene_step=1, candidates=1), label="quick")
 
 
+@pytest.mark.slow  # two design runs (~100 s); CI runs it
 def test_two_seeds_give_equal_verdicts_and_overlapping_intervals(tmp_path):
     import shutil
 

@@ -108,7 +108,7 @@ def shape_data():
     return draw(150), draw(40)
 
 
-@pytest.mark.parametrize("model", ["mlp", "cnn1d"])
+@pytest.mark.parametrize("model", ["mlp", pytest.param("cnn1d", marks=pytest.mark.slow)])  # cnn1d ~45 s: CI
 def test_ideal_observer_is_at_least_as_accurate_as_trained_classifiers(shape_data, model):
     (x_train, y_train), (x_test, y_test) = shape_data
     trained = train_model(x_train, y_train, model=model, task="shape", width=0.5,

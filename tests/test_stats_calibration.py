@@ -192,6 +192,7 @@ def test_shipped_preset_meets_the_table2_targets_it_reached():
         assert r["meets"]["total"] and r["meets"]["spread"] and r["meets"]["skew"], r
 
 
+@pytest.mark.slow  # a Table-2 fit through the CLI (~60 s); the writer is tested fast in test_fitted_to.py; CI runs it
 def test_calibrate_stats_cli_writes_sensor_scene_table_and_uncertainty(tmp_path):
     out = tmp_path / "d.toml"
     r = subprocess.run([sys.executable, "-m", "nlosplan", "calibrate", "--stats", "denali-table2", "--positions", "1",
