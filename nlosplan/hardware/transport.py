@@ -137,7 +137,8 @@ class LineReader:
         Returns
         -------
         list of str
-            Complete lines; a trailing partial line (cut by ``timeout``) is returned too.
+            Complete lines; a trailing partial line (cut by ``timeout``) is returned too, except with
+            ``whole_lines``: then it stays buffered and the next read returns it whole.
 
         Raises
         ------
@@ -157,8 +158,11 @@ class LineReader:
                 if last is None:
                     raise DeviceTimeout(f"no answer within {timeout:g} s")
                 break
-        text = bytes(self._buf).decode("ascii", errors="replace")
-        self._buf.clear()
+        keep = len(self._buf)
+        if whole_lines and not self._buf.endswith(b"\n"):   # a line cut by the timeout waits for its rest
+            keep = self._buf.rfind(b"\n") + 1
+        text = bytes(self._buf[:keep]).decode("ascii", errors="replace")
+        del self._buf[:keep]
         return [ln.rstrip("\r") for ln in text.split("\n") if ln.strip()]
 
     def unread(self, data: bytes) -> None:
