@@ -68,6 +68,11 @@ class SceneSet:
         (:func:`~nlosplan.simulators.presets.scene_model.scene_model`: ``"denali-tmf8828-3x3"`` — the
         Table-2 fit's albedo, diffuse base and mount in the signal), or ``""`` for the scene's defaults.
         :class:`~nlosplan.planner.design.run.DesignConfig` sets it from the space's reference.
+    session_floor_sd : float or None
+        How far one capture session's floor moves (standard deviation, a fraction of the floor; a session is one
+        object, size and lighting, as DENALI records them): None takes the scene model's
+        (:func:`~nlosplan.simulators.presets.scene_model.session_floor_sd`: 1.73 % for DENALI's unit, 0 without a
+        model); 0 gives every session the sensor's floor (the ablation).
     """
 
     objects: tuple[str, ...]
@@ -81,11 +86,19 @@ class SceneSet:
     backend: str = "fast"
     scene_kwargs: tuple = ()
     model: str = ""
+    session_floor_sd: float | None = None
 
     def __post_init__(self) -> None:
+        from nlosplan.data.build import MAX_SESSION_FLOOR_SD
         from nlosplan.simulators import check_backend
 
         check_backend(self.backend)
+        sd = self.session_floor_sd
+        if sd is not None:
+            if isinstance(sd, bool) or not isinstance(sd, (int, float)) or not 0 <= sd <= MAX_SESSION_FLOOR_SD:
+                raise UserError(f"session_floor_sd={sd!r} must be a number from 0 to {MAX_SESSION_FLOOR_SD:g} (a "
+                                "fraction of the floor)")
+            object.__setattr__(self, "session_floor_sd", float(sd))
         kw = self.scene_kwargs.items() if isinstance(self.scene_kwargs, dict) else self.scene_kwargs
         object.__setattr__(self, "scene_kwargs", tuple(sorted(
             (str(k), bool(v) if isinstance(v, bool) else float(v)) for k, v in kw)))
@@ -96,8 +109,17 @@ class SceneSet:
 
         return {**scene_options(self.model), **dict(self.scene_kwargs)}
 
+    def session_sd(self) -> float:
+        """The capture sessions' floor spread these scenes are drawn with (``session_floor_sd`` resolved)."""
+        from nlosplan.simulators.presets.scene_model import session_floor_sd
+
+        return session_floor_sd(self.model) if self.session_floor_sd is None else self.session_floor_sd
+
     def to_dict(self) -> dict:
         out = {k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()}
+        del out["session_floor_sd"]
+        if self.session_sd():  # the spread's value (a scene set without sessions keeps the key it had)
+            out["session_floor_sd"] = self.session_sd()
         if not self.scene_kwargs:  # the key of a run without worlds stays what it was
             del out["scene_kwargs"]
         else:
@@ -113,6 +135,7 @@ class SceneSet:
         """From :meth:`to_dict` (lists as tuples; ``scene_options`` is derived, not read)."""
         kw = {k: tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list) else v
               for k, v in data.items() if k != "scene_options"}
+        kw.setdefault("session_floor_sd", 0.0)   # to_dict leaves out a spread of 0
         return cls(**kw)
 
     @property
@@ -148,6 +171,10 @@ class ReferenceData:
         ``"fast"`` or the path of the real captures.
     seconds : float
         Time to build it.
+    session_floor_sd : float
+        The capture sessions' floor spread (a fraction of the reference sensor's floor) that noisy captures drawn
+        from ``means`` get (:meth:`session_offsets`); 0: one floor for every session. Real captures carry their
+        own sessions.
     """
 
     sensor: SensorConfig
@@ -159,6 +186,7 @@ class ReferenceData:
     crlb_labels: pd.DataFrame | None = None
     source: str = "fast"
     seconds: float = 0.0
+    session_floor_sd: float = 0.0
 
     @property
     def zones(self) -> tuple[int, int]:
@@ -178,11 +206,38 @@ class ReferenceData:
             raise UserError("real captures have no expected counts; the bounds use the simulated reference")
         return degrade_expected(self.means, d)
 
-    def design_mean_capture(self, d: Degradation, rng, repeats: int, rows=None) -> np.ndarray:
+    def session_offsets(self, seed: int) -> np.ndarray:
+        """How far each scene's capture session moves the floor, counts per bin of the reference sensor, (N,).
+
+        A session is one object, size and lighting (every position and repeat of it recorded in one sitting, as
+        DENALI records a folder): its floor is ``1 + shift`` times the reference sensor's, ``shift`` the dataset
+        build's draw (:func:`~nlosplan.data.build.session_shift`) for ``seed`` and the session's labels, so every
+        position of a session moves together and a run at another seed meets other sessions. Zeros when
+        ``session_floor_sd`` is 0.
+        """
+        n = len(self.labels)
+        if not self.session_floor_sd:
+            return np.zeros(n)
+        from nlosplan.data.build import session_shift
+        from nlosplan.sensor_models.noise import floor_counts
+
+        floor = {lights: floor_counts(self.sensor, lights == "on") for lights in ("on", "off")}
+        shifts = {}
+        out = np.empty(n)
+        for i, (obj, size, lights) in enumerate(zip(self.labels["object"], self.labels["size"], self.labels["lights"])):
+            key = (obj, size, lights)
+            if key not in shifts:
+                shifts[key] = session_shift(seed, obj, size, lights, self.session_floor_sd) * floor[lights]
+            out[i] = shifts[key]
+        return out
+
+    def design_mean_capture(self, d: Degradation, rng, repeats: int, rows=None, *,
+                            session_seed: int | None = None) -> np.ndarray:
         """The mean of ``repeats`` noisy captures of the design, (N, R', C', B') float64 (real: the capture rows).
 
         Simulated: the reference sensor's :meth:`~nlosplan.sensor_models.noise.CaptureNoise.mean_of_repeats` of the
-        design's expected counts.
+        design's expected counts, each scene's floor moved by its capture session (:meth:`session_offsets` of
+        ``session_seed``) before the design's degradation.
 
         Parameters
         ----------
@@ -193,13 +248,19 @@ class ReferenceData:
         rows : ndarray of int, shape (M,), optional
             Only these scenes (repeated indices draw a scene again, independently): (M, R', C', B'). Simulated
             references only: real captures cannot be drawn again.
+        session_seed : int, optional
+            Seed of the capture sessions' floors (the evaluation's seed); None: no session term.
         """
         rng = np.random.default_rng(rng)
         if self.means is None:
             if rows is not None:
                 raise UserError("real captures cannot be drawn again: a capture is what was captured")
             return degrade_counts(self.counts, d, rng).astype(np.float64)
-        means = self.means if rows is None else self.means[np.asarray(rows, dtype=np.int64)]
+        idx = np.arange(len(self.means)) if rows is None else np.asarray(rows, dtype=np.int64)
+        means = self.means[idx]
+        if session_seed is not None and self.session_floor_sd:
+            shift = self.session_offsets(session_seed)[idx]
+            means = np.maximum(means + shift[:, None, None, None], 0.0)
         return CaptureNoise.of(self.sensor).mean_of_repeats(rng, degrade_expected(means, d), repeats)
 
     def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:
@@ -213,6 +274,7 @@ class ReferenceData:
         path = Path(path)
         arrays = {k: getattr(self, k) for k in ("means", "counts", "crlb_lam", "crlb_jac") if getattr(self, k) is not None}
         meta = {"sensor": self.sensor.to_dict(), "source": self.source, "seconds": self.seconds,
+                "session_floor_sd": self.session_floor_sd,
                 "labels": self.labels.to_dict(orient="list"),
                 "crlb_labels": None if self.crlb_labels is None else self.crlb_labels.to_dict(orient="list")}
         with atomic_path(path) as tmp:
@@ -232,7 +294,8 @@ def load_reference(path: str | Path) -> ReferenceData:
             arrays = {k: z[k] for k in ("means", "counts", "crlb_lam", "crlb_jac") if k in z}
         crlb_labels = None if meta.get("crlb_labels") is None else pd.DataFrame(meta["crlb_labels"])
         _CACHE[key] = ReferenceData(SensorConfig.from_dict(meta["sensor"]), pd.DataFrame(meta["labels"]),
-                                    crlb_labels=crlb_labels, source=meta["source"], seconds=meta["seconds"], **arrays)
+                                    crlb_labels=crlb_labels, source=meta["source"], seconds=meta["seconds"],
+                                    session_floor_sd=float(meta.get("session_floor_sd", 0.0)), **arrays)
     return _CACHE[key]
 
 
@@ -279,9 +342,10 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
     # the twin's "relay wall only" is said once in the report, not per scene: its warnings are not repeated here
     means = np.asarray(expected_batch(batch, sensor, backend=scenes.backend, fidelity=scenes.fidelity,
                                       progress=step).expected, np.float32)
+    sd = scenes.session_sd()
     if not scenes.crlb_objects:
         return ReferenceData(sensor, labels, means=means, source=scenes.backend,
-                             seconds=time.perf_counter() - t0)
+                             seconds=time.perf_counter() - t0, session_floor_sd=sd)
     crlb_pos = scenes.positions[:: scenes.crlb_stride]
     crlb_scenes = [denali_scene(o, s, p, lights=scenes.lights, **kw) for o in scenes.crlb_objects
                    for s in scenes.sizes for p in crlb_pos]
@@ -293,7 +357,7 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
         progress(f"{r}x{c} bound scenes")
     return ReferenceData(sensor, labels, means=means, crlb_lam=lam, crlb_jac=jac,
                          crlb_labels=_scene_labels(scenes.crlb_objects, scenes.sizes, crlb_pos, scenes.lights),
-                         source=scenes.backend, seconds=time.perf_counter() - t0)
+                         source=scenes.backend, seconds=time.perf_counter() - t0, session_floor_sd=sd)
 
 
 def reference_from_dataset(dataset, sensor: SensorConfig, source: str) -> ReferenceData:

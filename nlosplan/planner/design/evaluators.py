@@ -132,7 +132,9 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
 
     torch.set_num_threads(1)
     # repeats averaged, as DENALI does (drawn as one Poisson sum: the same law at a 1 / repeats of the draws)
-    hist = ref.design_mean_capture(deg, np.random.default_rng([seed, 7]), int(fid["repeats"])).astype(np.float32)
+    # the capture sessions' floors are drawn from the seed (every repeat and position of a session shares one)
+    hist = ref.design_mean_capture(deg, np.random.default_rng([seed, 7]), int(fid["repeats"]),
+                                   session_seed=seed).astype(np.float32)
     labels = ref.labels.copy()
     labels["zones"] = f"{hist.shape[1]}x{hist.shape[2]}"
     labels["repeat"] = -1
@@ -140,7 +142,8 @@ def _trained(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[floa
     more = None
     if not ref.is_counts:  # more noisy captures of training scenes, each from its own stream (a budget above one each)
         extra_rng = np.random.default_rng([seed, 8])
-        more = lambda rows: ref.design_mean_capture(deg, extra_rng, int(fid["repeats"]), rows=rows)  # noqa: E731
+        more = lambda rows: ref.design_mean_capture(deg, extra_rng, int(fid["repeats"]), rows=rows,  # noqa: E731
+                                                    session_seed=seed)
     return trained_metric(Dataset(hist, labels, deg.bin_width_ps), task, fid, seed, condition, more=more)
 
 
