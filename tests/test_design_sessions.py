@@ -87,3 +87,17 @@ def test_scene_set_takes_the_model_spread_and_keys_it():
 def test_a_bad_session_spread_is_refused(bad):
     with pytest.raises(UserError, match="session_floor_sd=.* must be a number from 0 to 0.5"):
         SceneSet(objects=("A",), session_floor_sd=bad)
+
+
+def test_a_design_file_sets_or_refuses_the_session_spread(tmp_path):
+    from nlosplan.planner.design.config import load_config, quick_config
+
+    base = quick_config()
+    assert base.scenes.session_floor_sd is None   # the scene model's, resolved per run
+    good = tmp_path / "ablate.toml"
+    good.write_text("[scenes]\nsession_floor_sd = 0\n")
+    assert load_config(good, base).scenes.session_sd() == 0.0
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scenes]\nsession_floor_sd = 2\n")
+    with pytest.raises(UserError, match=r"\[scenes\]: session_floor_sd = 2 must be a number"):
+        load_config(bad, base)

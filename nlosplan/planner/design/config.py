@@ -28,6 +28,8 @@ keeps the default of the chosen mode)::
 
     [scenes]                     # SceneSet: simulated scenes of the evaluators
     positions_stride = 2
+    session_floor_sd = 0         # capture sessions' floor spread (fraction; default the scene model's,
+                                 # 0.0173 for DENALI's unit; 0 = one floor for every session)
 
     [worlds]                     # WorldsConfig: plausible worlds the answer must hold in
     count = 8                    # --worlds
@@ -109,7 +111,8 @@ def _schema() -> dict:
         "scenes": {"objects": objects, "sizes": list_of(one_of(*SIZES), min_len=1),
                    "positions": list_of(int_in(0, 99), min_len=1), "positions_stride": int_in(1, 99),
                    "lights": one_of("off", "on"), "repeats": count, "crlb_objects": objects, "crlb_stride": count,
-                   "fidelity": one_of(*FIDELITY_LEVELS), "backend": one_of(*BACKENDS)},
+                   "fidelity": one_of(*FIDELITY_LEVELS), "backend": one_of(*BACKENDS),
+                   "session_floor_sd": number_in(0, 0.5)},
     }
 
 
