@@ -101,3 +101,19 @@ def test_a_design_file_sets_or_refuses_the_session_spread(tmp_path):
     bad.write_text("[scenes]\nsession_floor_sd = 2\n")
     with pytest.raises(UserError, match=r"\[scenes\]: session_floor_sd = 2 must be a number"):
         load_config(bad, base)
+
+
+def test_the_result_names_the_session_spread_of_its_world():
+    from dataclasses import replace
+
+    from nlosplan.planner.design.config import quick_config
+    from nlosplan.planner.design.run import _world_model
+    from nlosplan.simulators.presets.scene_model import describe_scene_options
+
+    cfg = quick_config()
+    model = _world_model(cfg, describe_scene_options)
+    assert model["session_floor_sd"] == pytest.approx(SD)
+    assert model["scene"].endswith("; capture sessions' floor spread 1.73 %")
+    ablated = _world_model(replace(cfg, scenes=replace(cfg.scenes, session_floor_sd=0.0)), describe_scene_options)
+    assert ablated["session_floor_sd"] == 0.0
+    assert ablated["scene"].endswith("; one floor for every capture session")

@@ -453,10 +453,18 @@ def run_design(cfg: DesignConfig, out, *, resume: bool = False, workers: int | N
 
     result.update(provenance=provenance(cfg, time.perf_counter() - t0, executor_name), references=result.pop("_refs"),
                   stability=stability, checkpoint=str(out / CHECKPOINT),
-                  world_model={"sensor": cfg.space.reference, "scene_model": cfg.scenes.model or None,
-                               "scene_options": cfg.scenes.options(),
-                               "scene": describe_scene_options(cfg.scenes.options())})
+                  world_model=_world_model(cfg, describe_scene_options))
     return result
+
+
+def _world_model(cfg: DesignConfig, describe) -> dict:
+    """``result.json``'s ``world_model``: the reference sensor, its scene model and options, the capture sessions'
+    floor spread (a fraction of the floor; 0: one floor for every session) and one line saying all of it."""
+    sd = cfg.scenes.session_sd()
+    sessions = (f"capture sessions' floor spread {100 * sd:.2f} %" if sd else "one floor for every capture session")
+    return {"sensor": cfg.space.reference, "scene_model": cfg.scenes.model or None,
+            "scene_options": cfg.scenes.options(), "session_floor_sd": sd,
+            "scene": f"{describe(cfg.scenes.options())}; {sessions}"}
 
 
 def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
