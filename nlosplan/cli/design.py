@@ -34,9 +34,9 @@ the top-1 accuracy of the shape or size class.
 
 How: designs are emulated from simulated references (one per zone layout) by degrading
 histograms (jitter, bin merging, truncation, photon scaling). Fast bounds (Cramer-Rao
-bound, ideal observer) screen the space; the best learner of each task (--models, MLP
-and 1D CNN by default, compared on the reference design) trained on captures of a
-design verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout
+bound, ideal observer) screen the space; the best learner of each task (--models: MLP,
+1D CNN and k nearest neighbours by default, compared on the reference design) trained on
+captures of a design verifies it; nlopt (COBYLA) looks for the cheapest design of every zone layout
 and bin width with the bound corrected by the measured bound-to-trained gap.
 
 A verdict is about the sensor and a learner with a training budget: "met with an MLP
@@ -98,10 +98,10 @@ def _cluster(text: str) -> str:
 
 def _models(text: str) -> tuple[str, ...]:
     """``mlp,cnn1d`` -> the candidate learners (checked before any work starts)."""
-    from nlosplan.tasks.names import MODEL_NAMES, check_names
+    from nlosplan.tasks.names import LEARNER_NAMES, check_names
 
     try:
-        return tuple(check_names("model(s)", [m.strip() for m in text.split(",") if m.strip()], MODEL_NAMES))
+        return tuple(check_names("model(s)", [m.strip() for m in text.split(",") if m.strip()], LEARNER_NAMES))
     except UserError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -223,7 +223,8 @@ def add(sub) -> None:
                         "seeds and the worlds are drawn from it")
     p.add_argument("--models", type=_models, default=None, metavar="M1,M2",
                    help="candidate learners, compared on the reference design; the best per task is used "
-                        "(default mlp,cnn1d; also cnn3d, transformer)")
+                        "(default mlp,cnn1d,knn: DENALI's MLP and 1D CNN as the benchmark trains them, and k nearest "
+                        "neighbours on square-root counts, k chosen on a validation part; also cnn3d, transformer)")
     p.add_argument("--train-captures", type=int_type(2, MAX_TRAIN_CAPTURES), default=None, metavar="N",
                    help="training captures each learner gets at a design (the training budget; a verdict is 'met "
                         "with a 1D CNN trained on N captures'). Default: one per training scene (70 %% of the "

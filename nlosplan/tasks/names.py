@@ -4,15 +4,18 @@ from __future__ import annotations
 
 from nlosplan.errors import UserError
 
-__all__ = ["MODEL_NAMES", "MODEL_LABELS", "model_phrase",
+__all__ = ["MODEL_NAMES", "LEARNER_NAMES", "MODEL_LABELS", "model_phrase",
            "TASKS", "TASK_LABEL", "SPLITS", "PROFILES", "DEFAULT_EPOCHS", "DEFAULT_PATIENCE",
            "DEFAULT_WIDTH", "SMALL", "check_names"]
 
 #: The DENALI benchmark models.
 MODEL_NAMES: tuple[str, ...] = ("mlp", "cnn1d", "cnn3d", "transformer")
+#: Every learner the design planner may train: the benchmark models and k nearest neighbours on square-root counts
+#: (:mod:`nlosplan.tasks.neighbours`).
+LEARNER_NAMES: tuple[str, ...] = MODEL_NAMES + ("knn",)
 #: How reports name them, with the article a sentence needs ("met with an MLP trained on ...").
 MODEL_LABELS = {"mlp": ("an", "MLP"), "cnn1d": ("a", "1D CNN"), "cnn3d": ("a", "3D CNN"),
-                "transformer": ("a", "Transformer")}
+                "transformer": ("a", "Transformer"), "knn": ("a", "k-nearest-neighbour learner")}
 #: Task names: localization, 30-way shape classification, 2-way size classification.
 TASKS: tuple[str, ...] = ("loc", "shape", "size")
 #: Label column each classification task predicts.

@@ -186,8 +186,14 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
     asked = requested(fid)
     x, y, note = training_set(data.train.histograms, data.y_train, asked, seed=seed, stratify=task != Task.LOC,
                               more=None if more is None else (lambda rows: more(data.split.train[rows])))
-    cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
-    model = train_model(x, y, model=fid["model"], task=task, config=cfg, width=float(fid["width"]), classes=classes)
+    if fid["model"] == "knn":   # no epochs, no width: k is chosen on the same validation share
+        from nlosplan.tasks.neighbours import fit_neighbours
+
+        model = fit_neighbours(x, y, task=task, classes=classes, seed=seed)
+    else:
+        cfg = train_config(fid["model"], task, epochs=int(fid["epochs"]), seed=seed)
+        model = train_model(x, y, model=fid["model"], task=task, config=cfg, width=float(fid["width"]),
+                            classes=classes)
     keep = _rows(data.test.labels, condition)
     scores, truth = model.predict(data.test.histograms)[keep], data.y_test[keep]
     score = loc_rmse if task == Task.LOC else top1_accuracy
@@ -197,9 +203,12 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
         return math.nan, (math.nan, math.nan), {}
     value = stat(np.arange(n))
     lo, hi = _bootstrap(stat, n, int(fid["bootstrap"]), seed)
-    extra = {"model": fid["model"], "epochs": len(model.history), TRAIN_CAPTURES: asked, "n_train": len(x),
-             "n_fit": int(model.n_train), "n_val": int(model.n_val), "n_test": n,
+    knn = fid["model"] == "knn"
+    extra = {"model": fid["model"], "epochs": 0 if knn else len(model.history), TRAIN_CAPTURES: asked,
+             "n_train": len(x), "n_fit": int(model.n_train), "n_val": int(model.n_val), "n_test": n,
              "train_seconds": float(model.train_seconds)}
+    if knn:
+        extra["k"] = int(model.k)
     if note:
         extra[TRAIN_NOTE] = note
     if task == Task.LOC:

@@ -15,8 +15,9 @@ __all__ = ["SearchConfig", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
 #: Evaluation seeds are ``seed * SEED_STRIDE + i`` (``i < SEED_STRIDE // 10``); the run's seed is at most
 #: ``MAX_SEED`` (:data:`nlosplan.resources.MAX_DESIGN_SEED`, defined once there), so they stay below 2**32.
 SEED_STRIDE = 1000
-#: Candidate learners of the trained evaluator (the best per task is used).
-DEFAULT_MODELS = ("mlp", "cnn1d")
+#: Candidate learners of the trained evaluator (the best per task is used): DENALI's MLP and 1D CNN cells as the
+#: benchmark trains them, and k nearest neighbours on square-root counts (:mod:`nlosplan.tasks.neighbours`).
+DEFAULT_MODELS = ("mlp", "cnn1d", "knn")
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,7 @@ class SearchConfig:
     seed : int
         The run's seed, 0 to :data:`MAX_SEED` (``--seed``).
     models : tuple of str
-        Candidate learners (:data:`~nlosplan.tasks.names.MODEL_NAMES`); the best on the reference design
+        Candidate learners (:data:`~nlosplan.tasks.names.LEARNER_NAMES`); the best on the reference design
         is used per task.
     max_seeds : int
         Most seeds of one design (and of one design in one world) while it is undecided.
@@ -60,7 +61,7 @@ class SearchConfig:
     budget: int = 30
 
     def __post_init__(self) -> None:
-        from nlosplan.tasks.names import MODEL_NAMES, check_names
+        from nlosplan.tasks.names import LEARNER_NAMES, check_names
 
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
             raise UserError(f"seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
@@ -77,7 +78,7 @@ class SearchConfig:
         if budget is not None:
             check_captures_value(budget, f"[search.fidelity.trained] {TRAIN_CAPTURES}")
         models = (self.models,) if isinstance(self.models, str) else tuple(self.models)
-        object.__setattr__(self, "models", tuple(check_names("model(s)", models, MODEL_NAMES)))
+        object.__setattr__(self, "models", tuple(check_names("model(s)", models, LEARNER_NAMES)))
 
     def seed_of(self, i: int) -> int:
         """The evaluation seed of a design's ``i``-th run."""

@@ -1,0 +1,168 @@
+"""k nearest neighbours on square-root counts: a learner that needs no training time.
+
+A capture is compared with every training capture after the square root of its counts (the variance-stabilising
+transform of Poisson counts: every bin's noise is then about 1/2 whatever its level, so a plain Euclidean distance
+weighs the bins by what they can tell); the answer is the mean position (localization) or the vote share per class
+(shape, size) of its ``k`` nearest training captures. ``k`` is chosen on a seeded validation part of the training
+captures (15 %, stratified for classes, the share the networks hold out for early stopping) among
+:data:`K_CHOICES`, then every training capture is a neighbour. scikit-learn's brute-force neighbours do the search.
+
+Why here: on the design's simulated DENALI world the networks, trained for seconds on a few thousand captures,
+stay far below DENALI's recipe; this learner reaches its answer in well under a second and is at least as good at
+those budgets (``docs/design-planner.md``, "The learners"). It is one of the design's candidate learners
+(:data:`~nlosplan.tasks.names.LEARNER_NAMES`), not a DENALI benchmark model.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nlosplan.errors import UserError
+
+__all__ = ["K_CHOICES", "NeighbourModel", "fit_neighbours", "root_counts"]
+
+#: Neighbour counts the validation part chooses among.
+K_CHOICES = (1, 3, 5, 9, 15)
+
+
+def root_counts(histograms) -> np.ndarray:
+    """``sqrt(max(counts, 0))`` flattened per capture: (N, rows, cols, bins) -> (N, rows * cols * bins) float32."""
+    x = np.asarray(histograms, dtype=np.float32)
+    if x.ndim != 4:
+        raise UserError(f"histograms must be (N, rows, cols, bins), got {x.shape}")
+    return np.sqrt(np.maximum(x, 0.0)).reshape(len(x), -1)
+
+
+@dataclass(eq=False)
+class NeighbourModel:
+    """A fitted k-nearest-neighbour learner (:func:`fit_neighbours`).
+
+    Attributes
+    ----------
+    task : {"loc", "shape", "size"}
+    k : int
+        Neighbours per answer (chosen on the validation part).
+    classes : tuple of str or None
+        Class names in output order (None for localization).
+    history : list of dict
+        The validation score of every ``k`` tried: ``{"k", "val_score"}`` (RMSE in metres, or the error rate).
+    n_train, n_val : int
+        Training captures that are neighbours (all of them), and the validation part that chose ``k``.
+    train_seconds : float
+    """
+
+    task: str
+    k: int
+    classes: tuple[str, ...] | None
+    history: list[dict] = field(default_factory=list)
+    n_train: int = 0
+    n_val: int = 0
+    train_seconds: float = 0.0
+    _search: object = None
+
+    def predict(self, histograms) -> np.ndarray:
+        """(N, 2) mean (x, y) of the neighbours in metres (localization), or (N, classes) vote shares."""
+        x = root_counts(histograms)
+        if self.task == "loc":
+            return np.asarray(self._search.predict(x), dtype=np.float64)
+        return np.asarray(self._search.predict_proba(x), dtype=np.float64)
+
+
+def _estimator(task: str, k: int):
+    from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
+
+    cls = KNeighborsRegressor if task == "loc" else KNeighborsClassifier
+    return cls(n_neighbors=k, algorithm="brute")
+
+
+def _score(task: str, est, x, y) -> float:
+    pred = est.predict(x)
+    if task == "loc":
+        return float(np.sqrt(np.mean((np.asarray(pred) - y) ** 2)))
+    return float(np.mean(np.asarray(pred) != y))
+
+
+def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 42,
+                   val_fraction: float = 0.15) -> NeighbourModel:
+    """Fit the k-nearest-neighbour learner on training captures.
+
+    Parameters
+    ----------
+    histograms : array_like, shape (N, rows, cols, bins)
+        Counts of the training captures.
+    targets : array_like
+        (N, 2) (x, y) in metres for ``task="loc"``; (N,) class labels (stored as str) otherwise.
+    task : {"loc", "shape", "size"}
+    classes : sequence of str, optional
+        Class names in output order (default: the sorted distinct training labels); the vote shares of
+        :meth:`NeighbourModel.predict` follow it, with 0 for a class no training capture has.
+    seed : int
+        Seed of the validation part.
+    val_fraction : float
+        Part of the training captures that chooses ``k`` (then they are neighbours too).
+
+    Raises
+    ------
+    UserError
+        Fewer than 2 training captures, mismatched targets, a label outside ``classes``.
+    """
+    from sklearn.model_selection import train_test_split
+
+    t0 = time.perf_counter()
+    x = root_counts(histograms)
+    n = len(x)
+    if n < 2:
+        raise UserError(f"k nearest neighbours need at least 2 training captures, got {n}")
+    names = None
+    if task == "loc":
+        y = np.asarray(targets, dtype=np.float64)
+        if y.shape != (n, 2):
+            raise UserError(f"localization targets must be (N, 2), got {y.shape}")
+        strat = None
+    else:
+        raw = np.asarray(targets).astype(str)
+        if raw.shape != (n,):
+            raise UserError(f"class targets must be (N,), got {raw.shape}")
+        names = tuple(sorted(set(raw))) if classes is None else tuple(str(c) for c in classes)
+        lookup = {c: i for i, c in enumerate(names)}
+        unknown = sorted(set(raw) - set(lookup))
+        if unknown:
+            raise UserError(f"training labels {', '.join(unknown[:5])} are not among the classes")
+        y = np.array([lookup[c] for c in raw], dtype=np.int64)
+        _, counts = np.unique(y, return_counts=True)
+        strat = y if counts.min() >= 2 else None
+    n_val = int(round(val_fraction * n))
+    history = []
+    k_best = min(K_CHOICES[2], n)
+    if n_val >= 1 and n - n_val >= 1:
+        try:
+            fit, val = train_test_split(np.arange(n), test_size=n_val, stratify=strat, random_state=int(seed) % 2**32)
+        except ValueError:  # a class too small for a stratified part
+            fit, val = train_test_split(np.arange(n), test_size=n_val, random_state=int(seed) % 2**32)
+        for k in (k for k in K_CHOICES if k <= len(fit)):
+            est = _estimator(task, k).fit(x[fit], y[fit])
+            history.append({"k": k, "val_score": _score(task, est, x[val], y[val])})
+        k_best = min(history, key=lambda h: (h["val_score"], h["k"]))["k"]
+    else:
+        n_val = 0
+    est = _estimator(task, k_best).fit(x, y)
+    if names is not None and len(est.classes_) < len(names):
+        est = _padded(est, len(names))
+    return NeighbourModel(task, int(k_best), names, history, n_train=n, n_val=n_val,
+                          train_seconds=time.perf_counter() - t0, _search=est)
+
+
+class _padded:
+    """A fitted classifier whose vote shares cover every class (classes no training capture has get 0)."""
+
+    def __init__(self, est, n_classes: int):
+        self.est, self.n_classes = est, n_classes
+
+    def predict_proba(self, x) -> np.ndarray:
+        p = self.est.predict_proba(x)
+        out = np.zeros((len(p), self.n_classes))
+        out[:, np.asarray(self.est.classes_, dtype=np.int64)] = p
+        return out

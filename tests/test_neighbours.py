@@ -1,0 +1,73 @@
+"""k nearest neighbours on square-root counts: the design's learner that needs no training time."""
+
+import numpy as np
+import pytest
+
+from nlosplan.errors import UserError
+from nlosplan.tasks.metrics import loc_rmse, top1_accuracy
+from nlosplan.tasks.neighbours import K_CHOICES, fit_neighbours, root_counts
+
+
+def captures(n_per, rng, classes=("a", "b", "c"), level=50.0):
+    """Poisson captures (1 x 1 zone x 16 bins) whose peak bin tells the class, and whose peak height the position."""
+    x, y, xy = [], [], []
+    for i, c in enumerate(classes):
+        for _ in range(n_per):
+            pos = rng.uniform(0, 0.3)
+            lam = np.full(16, 20.0)
+            lam[3 + 4 * i] += level * (1 + 10 * pos)
+            x.append(rng.poisson(lam))
+            y.append(c)
+            xy.append((pos, 0.3 - pos))
+    return np.array(x, float).reshape(-1, 1, 1, 16), np.array(y), np.array(xy)
+
+
+def test_classes_are_told_apart_and_the_votes_follow_the_class_order():
+    rng = np.random.default_rng(0)
+    x, y, _ = captures(40, rng)
+    xt, yt, _ = captures(20, rng)
+    m = fit_neighbours(x, y, task="shape", classes=("a", "b", "c", "d"), seed=1)
+    p = m.predict(xt)
+    assert p.shape == (60, 4)
+    assert np.allclose(p.sum(axis=1), 1.0) and np.all(p[:, 3] == 0)   # "d": no training capture, no vote
+    truth = np.array([("a", "b", "c", "d").index(v) for v in yt])
+    assert top1_accuracy(p, truth) > 0.95
+    assert m.k in K_CHOICES and m.n_train == 120 and m.n_val == 18
+    assert [h["k"] for h in m.history] == list(K_CHOICES)
+
+
+def test_positions_are_regressed_and_k_is_chosen_on_the_validation_part():
+    rng = np.random.default_rng(1)
+    x, _, xy = captures(150, rng, classes=("a",), level=400.0)
+    xt, _, xyt = captures(50, rng, classes=("a",), level=400.0)
+    m = fit_neighbours(x, xy, task="loc", seed=3)
+    pred = m.predict(xt)
+    assert pred.shape == (50, 2)
+    # far better than predicting the mean position (about 8.7 cm here)
+    assert loc_rmse(pred, xyt) < 0.3 * loc_rmse(np.broadcast_to(xy.mean(0), xyt.shape), xyt)
+    best = min(m.history, key=lambda h: (h["val_score"], h["k"]))
+    assert m.k == best["k"]
+    # the same seed gives the same learner
+    again = fit_neighbours(x, xy, task="loc", seed=3)
+    assert again.k == m.k and np.array_equal(again.predict(xt), pred)
+
+
+def test_root_counts_stabilise_the_poisson_noise():
+    rng = np.random.default_rng(2)
+    lam = np.array([25.0, 100.0, 10_000.0])
+    x = rng.poisson(np.broadcast_to(lam, (20_000, 3))).reshape(-1, 1, 1, 3)
+    sd = root_counts(x).std(axis=0)
+    assert np.allclose(sd, 0.5, atol=0.04)   # about 1/2 at every level: plain distances weigh bins alike
+    assert root_counts(np.full((1, 1, 1, 2), -3.0)).tolist() == [[0.0, 0.0]]
+
+
+def test_bad_training_sets_are_refused():
+    x = np.ones((5, 1, 1, 4))
+    with pytest.raises(UserError, match="at least 2 training captures"):
+        fit_neighbours(x[:1], np.zeros((1, 2)), task="loc")
+    with pytest.raises(UserError, match=r"localization targets must be \(N, 2\)"):
+        fit_neighbours(x, np.zeros(5), task="loc")
+    with pytest.raises(UserError, match="training labels z are not among the classes"):
+        fit_neighbours(x, np.array(list("aabbz")), task="size", classes=("a", "b"))
+    with pytest.raises(UserError, match=r"histograms must be \(N, rows, cols, bins\)"):
+        root_counts(np.ones((5, 4)))
