@@ -174,3 +174,15 @@ def test_learners_beyond_their_bound_are_listed_with_what_is_inconsistent():
         assert d.zones == (1, 1) and f["hi"] < f["bound"] and "Cramér–Rao" in f["issue"]
         assert f["bound"] == pytest.approx(ev.run(Evaluator.BOUND, LOC, d).value)
     assert "beat their task's bound" in consistency_text({"consistency": flagged})
+
+
+def test_a_class_learner_above_the_observer_in_a_world_with_sessions_is_explained():
+    shape = {"task": "shape", "bound_name": "ideal observer", "issue": "above"}
+    loc = {"task": "loc", "bound_name": "Cramér–Rao bound", "issue": "below"}
+    with_sessions = consistency_text({"consistency": [shape], "world_model": {"session_floor_sd": 0.01732}})
+    assert "capture sessions" in with_sessions and "spread 1.73 %" in with_sessions
+    assert "4.2 % on a size it never saw" in with_sessions
+    # no sessions in the world, or only a localization figure flagged: no such sentence
+    assert "capture sessions" not in consistency_text({"consistency": [shape], "world_model": {"session_floor_sd": 0}})
+    assert "capture sessions" not in consistency_text({"consistency": [loc],
+                                                       "world_model": {"session_floor_sd": 0.01732}})
