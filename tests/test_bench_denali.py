@@ -103,6 +103,33 @@ def test_bench_denali_text_says_what_it_is(capsys, synthetic_captures):
     assert "validation-chosen: not run (--no-validation)" in out.out
 
 
+def test_bench_denali_knn_cell_on_denalis_split(capsys, synthetic_captures):
+    from nlosplan.tasks.denali_protocol import denali_split
+
+    argv = ["bench", "denali", "--device", "cpu", "--objects", "1,7,A,S", "--positions", "0-8", "--models", "knn",
+            "--tasks", "loc,size", "--no-validation", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    rows = {r["task"]: r for r in out["rows"]}
+    assert set(rows) == {"loc", "size"} and {r["model"] for r in out["rows"]} == {"knn"}
+    for r in rows.values():
+        # one test-blind figure in every column, no epochs, no Table 1 figure
+        assert r["predicted"] == r["predicted_last_epoch"] == r["predicted_validation_epoch"]
+        assert r["real"] is None and r["epochs"] == 0 and set(r["predicted_by_lights"]) == {"on", "off"}
+    # DENALI's split, not another: 70/30 of the 144 captures
+    n = 4 * 2 * 9 * 2
+    train, test = denali_split("size", np.array(["x"] * n))
+    assert rows["size"]["n_test"] == len(test) and rows["size"]["n_train"] == len(train)
+    assert rows["size"]["predicted"] >= 0.75         # the synthetic sizes are learnable (chance 50 %)
+    assert rows["loc"]["predicted"] < 0.5 * 0.105     # far better than predicting the mean position
+    cell = next(c for c in out["cells"] if c["task"] == "size")
+    assert cell["settings"]["k"] in cell["settings"]["k_choices"] and len(cell["history"]) >= 1
+    argv[argv.index("--json")] = "--quiet"
+    assert main(argv[:-1]) == 0
+    text = capsys.readouterr().out
+    assert "knn: k nearest neighbours on square-root counts" in text and "Table 1 has no such learner" in text
+
+
 def test_full_budget_on_the_cpu_warns_how_long_before_any_work(capsys, monkeypatch):
     from nlosplan.tasks import denali_bench
 

@@ -223,6 +223,9 @@ def estimate_seconds(models, tasks, protocol: Protocol, device: str, *, validati
     n_train = 0.7 * protocol.n_captures
     total = 0.0
     per_sample: dict[str, float] = {}
+    if "knn" in models:  # distances of every test row to every training row, 3x3x128 counts: ~2e-7 s per pair here
+        total += len(tasks) * 2e-7 * n_train * 0.3 * protocol.n_captures * (1 + 0.15 * len((1, 3, 5, 9, 15)))
+        models = [m for m in models if m != "knn"]
     for model in models:
         net = denali_model(model, "shape", shape, 30).to(device)
         opt = torch.optim.Adam(net.parameters(), lr=1e-3)
@@ -288,7 +291,9 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
         Preset name or sensor file.
     budget : {"full", "quick"}
         See the module notes.
-    models : sequence of {"cnn1d", "mlp"}
+    models : sequence of {"cnn1d", "mlp", "knn"}
+        DENALI's recipe cells, and k nearest neighbours (:func:`~nlosplan.tasks.denali_knn.knn_cell`, not in
+        Table 1: its ``real`` is None).
     tasks : sequence of {"loc", "shape", "size"}
     device : str
         A device of :func:`~nlosplan.tasks.denali_recipe.resolve_device` (resolved already or ``"auto"``).
@@ -316,7 +321,9 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
     from nlosplan.tasks.names import TASKS, check_names
 
     t0 = time.perf_counter()
-    models = check_names("model(s)", models, RECIPE_MODELS)
+    from nlosplan.tasks.denali_knn import KNN, knn_cell
+
+    models = check_names("model(s)", models, RECIPE_MODELS + (KNN,))
     tasks = check_names("task(s)", tasks, TASKS)
     dev = resolve_device(device)
     protocol = protocol_for(budget, objects=objects, positions=positions, epochs=epochs)
@@ -328,6 +335,15 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
         if task != "loc" and len(set(targets)) < 2:
             raise UserError(f"task {task!r} needs at least 2 classes; the protocol has {', '.join(set(targets))}")
         for model in models:
+            if model == KNN:   # no epochs: one test-blind fit, k chosen on a share of the training rows
+                if progress is not None:
+                    progress.stage(f"knn {task}", 1, "fit")
+                res = knn_cell(hist, targets, task)
+                if progress is not None:
+                    progress.set(1, 1, f"k {res.settings['k']}")
+                rows.append(_row(res, None, res, protocol, labels))   # its figure is test-blind already
+                cells.append(res.to_dict())
+                continue
             n_ep = protocol.cell_epochs(cell_settings(model, task)["epochs"])
             runs = [False, True] if validation else [False]
             results = []
