@@ -301,3 +301,33 @@ def test_worlds_blame_a_parameter_only_for_worlds_that_fail_not_for_undecided_on
     assert driver in ("albedo", "photon_scale")
     assert "breaks it (not met in worlds 1;" in breaks and breaks.endswith(
         "; undecided in worlds 4 (the interval straddles the threshold when the seeds or the budget ran out)")
+
+
+def test_the_decide_stage_spends_seeds_on_undecided_per_parameter_rows():
+    from nlosplan.planner.design.lines import undecided_lines
+    from nlosplan.planner.design.summary import summarize
+
+    req = Requirement("size", 0.9)
+
+    def run(budget):
+        s = DesignSearch(SPACE, [req], SearchConfig(grid_points=3, refine_steps=0, seeds=2, models=("mlp",),
+                                                    budget=budget, max_seeds=6), REFS)
+        return s, drive(s, Fake(noise=0.03))
+
+    plain, _ = run(0)
+    rows = {r["axis"]: r["verdict"] for r in summarize(plain.evidence)["requirements"]}
+    assert "undecided" in rows.values()
+    ref = SPACE.reference_design()
+    # every undecided row's line runs through the reference, its best undecided design: one design, once
+    assert undecided_lines(plain.evidence, req) == [ref]
+    assert len(plain.evidence.runs(req, ref)) == 2
+    deciding, calls = run(20)
+    extra = [c for c in calls if c.evaluator == "trained" and c.design == ref and c.seed % 1000 >= 2]
+    assert extra, "no seed was spent on the undecided rows"
+    runs = deciding.evidence.runs(req, ref)
+    assert len(runs) > 2 and [r.seed % 1000 for r in runs] == list(range(len(runs)))
+    # it stops once the reference is decided or at max_seeds: nothing left to spend on
+    tv = deciding.evidence.trained_value(req, ref)
+    assert tv.verdict != "undecided" or tv.seeds == 6
+    assert undecided_lines(deciding.evidence, req) == []
+    assert deciding.evidence.extra_spent() <= 20

@@ -21,7 +21,7 @@ keeps the default of the chosen mode)::
     seed = 0                     # the run's seed (--seed): noise, splits and training seeds
     models = ["mlp", "cnn1d"]    # candidate learners (--models); the best per task is used
     max_seeds = 8                # most seeds of an undecided candidate
-    budget = 30                  # extra evaluations to decide undecided candidates
+    budget = 30                  # extra evaluations to decide undecided candidates and rows
     [search.fidelity.trained]
     train_captures = 25200       # training captures of each learner (--train-captures; default one per
                                  # training scene: 2,100 here, 700 with --quick)
@@ -81,7 +81,7 @@ def quick_config() -> DesignConfig:
     space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
                         axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
     search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid,
-                          max_seeds=4, budget=8)
+                          max_seeds=4, budget=16)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
     worlds = WorldsConfig(count=4, scene_step=2, candidates=3)

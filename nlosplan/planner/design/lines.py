@@ -18,10 +18,10 @@ import numpy as np
 from nlosplan.planner.design.evaluation import Status
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design, DesignSpace
-from nlosplan.planner.design.verdicts import NOT_MET, Estimate
+from nlosplan.planner.design.verdicts import MET, NOT_MET, UNDECIDED, Estimate
 
 __all__ = ["CONTINUOUS", "MORE_IS_BETTER", "CURVE_AXES", "MONOTONE", "Line", "LinePoint", "axis_grid", "lines",
-           "line_points", "bracket"]
+           "line_points", "bracket", "undecided_lines"]
 
 CONTINUOUS = ("jitter_fwhm_ps", "pulse_fwhm_ps", "photon_fraction")
 #: Axes along which a larger value is more (better, costlier) hardware.
@@ -163,3 +163,30 @@ def bracket(points: list[LinePoint], req: Requirement, more_is_better: bool) -> 
                 return None
             return a, b
     return None
+
+
+def undecided_lines(evidence, req: Requirement) -> list[Design]:
+    """Per axis of the space, the design that would decide the requirement's undecided per-parameter row.
+
+    A row (the least hardware along one axis from the reference design) is *met* when some design of its line
+    is met, *undecided* when none is but some is undecided. For each undecided row this is its undecided design
+    with the best learner's mean (the likeliest to be met), while it has fewer than the run's ``max_seeds``: one
+    more seed narrows its interval, so a re-run at another seed reaches the same verdict more often.
+
+    Returns
+    -------
+    list of Design
+        At most one per axis, without repeats, in the space's axis order.
+    """
+    out: list[Design] = []
+    for axis in evidence.space.axes:
+        pts = [p for p in line_points(evidence, req, axis, evidence.base) if p.trained is not None]
+        if not pts or any(p.trained.verdict == MET for p in pts):
+            continue
+        open_pts = [p for p in pts if p.trained.verdict == UNDECIDED and p.trained.seeds < evidence.config.max_seeds]
+        if not open_pts:
+            continue
+        best = (min if req.smaller_is_better else max)(open_pts, key=lambda p: p.trained.value)
+        if best.design not in out:
+            out.append(best.design)
+    return out

@@ -23,9 +23,9 @@ learns is kept in a typed evidence store whose read-only face, :attr:`~DesignSea
    (:meth:`~DesignSearch.ingest_candidates`).
 6. **verify** — the cheapest candidates per requirement (optimized, and the cheapest scanned designs not
    already failed) over ``seeds`` seeds.
-7. **decide** — the cheapest candidate whose verdict is *undecided* (:mod:`~nlosplan.planner.design.verdicts`)
-   gets one more seed (new noise, split and training seed) per round, until it is decided, reaches
-   ``max_seeds`` or the run's ``budget`` of extra evaluations is spent.
+7. **decide** — the cheapest *undecided* candidate (:mod:`~nlosplan.planner.design.verdicts`), then the design
+   deciding each undecided per-parameter row, get one more seed (new noise, split and training seed) per round,
+   until decided, at ``max_seeds``, or the run's ``budget`` of extra evaluations is spent.
 8. **worlds** — the cheapest met candidates in the plausible worlds (:mod:`~nlosplan.planner.design.robust`);
    the driver simulates the worlds' references the search names (:meth:`~DesignSearch.needed_references`,
    :meth:`~DesignSearch.ingest_references`).
@@ -45,7 +45,7 @@ from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluation import Evaluation, Evaluator
 from nlosplan.planner.design.evidence import Candidate, Evidence, EvidenceStore
 from nlosplan.planner.design.jobs import DesignJob, OptimizeJob
-from nlosplan.planner.design.lines import MONOTONE, MORE_IS_BETTER, bracket, line_points, lines
+from nlosplan.planner.design.lines import MONOTONE, MORE_IS_BETTER, bracket, line_points, lines, undecided_lines
 from nlosplan.planner.design.optimize import optimize_jobs
 from nlosplan.planner.design.requirements import Requirement, Task
 from nlosplan.planner.design.search_config import DEFAULT_MODELS, MAX_SEED, SEED_STRIDE, SearchConfig
@@ -267,7 +267,7 @@ class DesignSearch:
         return jobs
 
     def _decide(self) -> list[DesignJob]:
-        """One more seed for the cheapest undecided candidate of each requirement, while the budget lasts."""
+        """One more seed: the cheapest undecided candidate per requirement, then each undecided row's design."""
         ev = self._ev
         jobs, left = [], ev.budget_left()
         for req in ev.requirements:
@@ -279,6 +279,13 @@ class DesignSearch:
                     if tv.seeds < ev.config.max_seeds and len(jobs) < left:
                         jobs.append(self.job(Evaluator.TRAINED, req, c.design, len(ev.runs(req, c.design))))
                     break  # one per requirement and round: the cheapest undecided
+        keys = {j.key for j in jobs}   # then the undecided per-parameter rows, with what budget is left
+        for req in ev.requirements:
+            for d in undecided_lines(ev, req):
+                job = self.job(Evaluator.TRAINED, req, d, len(ev.runs(req, d)))
+                if len(jobs) < left and job.key not in keys:
+                    jobs.append(job)
+                    keys.add(job.key)
         return jobs
 
     def _worlds(self) -> list[DesignJob]:
