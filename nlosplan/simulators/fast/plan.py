@@ -197,7 +197,7 @@ def _check_batch(scenes: list[Scene]) -> None:
         )
         if not same:
             raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes), the number of objects, "
-                            "their reflectance models and fixture and support flags; object meshes, poses, albedos "
+                            "their reflectance models, fixture flags and support flags; object meshes, poses, albedos "
                             "and lights may differ")
 
 
