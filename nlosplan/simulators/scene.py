@@ -365,6 +365,12 @@ class HiddenObject:
         Part of the rig that moves with the gantry (the object's mount):
         it stays in the background capture, see :meth:`Scene.without_objects`.
     name : str
+    support : bool
+        Part of the rig that holds the hidden object (DENALI's mount and its
+        plate): a smooth, secondary addition to the object's signal, so the
+        fast simulator samples its surface with the fidelity's
+        ``support_samples`` instead of ``object_samples``
+        (:class:`~nlosplan.simulators.fast.fidelity.Fidelity`).
 
     Notes
     -----
@@ -382,6 +388,7 @@ class HiddenObject:
     name: str = "object"
     diffuse_albedo: float = 0.0
     fixture: bool = False
+    support: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.mesh, Mesh):
@@ -405,10 +412,13 @@ class HiddenObject:
                             "reflects more than the incident power; their sum must be <= 1")
         if not isinstance(self.fixture, (bool, np.bool_)):
             raise UserError(f"fixture={self.fixture!r} must be true or false")
+        if not isinstance(self.support, (bool, np.bool_)):
+            raise UserError(f"support={self.support!r} must be true or false")
         object.__setattr__(self, "albedo", float(self.albedo))
         object.__setattr__(self, "lobe_fwhm_deg", float(lobe))
         object.__setattr__(self, "diffuse_albedo", float(diff))
         object.__setattr__(self, "fixture", bool(self.fixture))
+        object.__setattr__(self, "support", bool(self.support))
 
     def world_vertices(self) -> np.ndarray:
         """Mesh vertices in the world frame, shape (V, 3)."""

@@ -374,7 +374,8 @@ def _model_reference(scene, sensor, retro_ref: np.ndarray, retro_albedo: float, 
     term with the reference's 16,384 samples needs ~16 GB).
     """
     ref_fid = FIDELITY_LEVELS["reference"]
-    lamb_fid = Fidelity(**{**ref_fid.to_dict(), "object_samples": ref_fid.diffuse_samples})
+    lamb_fid = Fidelity(**{**ref_fid.to_dict(), "object_samples": ref_fid.diffuse_samples,
+                           "support_samples": ref_fid.diffuse_samples})
     obj = scene.objects[0]
     out = retro_ref * (obj.albedo / retro_albedo)
     parts = ([dataclasses.replace(obj, reflectance="lambertian", albedo=obj.diffuse_albedo, diffuse_albedo=0.0)]

@@ -192,12 +192,13 @@ def _check_batch(scenes: list[Scene]) -> None:
             and all(_same_rect(a, b) for a, b in zip(s.planes, base.planes))
             and len(s.objects) == len(base.objects)
             and all(a.reflectance == b.reflectance and a.lobe_fwhm_deg == b.lobe_fwhm_deg and a.fixture == b.fixture
+                    and a.support == b.support
                     for a, b in zip(s.objects, base.objects))
         )
         if not same:
             raise UserError("a batch of scenes must share the rig (LiDAR, wall, planes), the number of objects, "
-                            "their reflectance models and fixture flags; object meshes, poses, albedos and lights "
-                            "may differ")
+                            "their reflectance models, fixture flags and support flags; object meshes, poses, albedos "
+                            "and lights may differ")
 
 
 def _same_rect(a, b) -> bool:
@@ -271,13 +272,16 @@ def _object_parts(objs: list, fid: Fidelity) -> tuple[list[tuple[str, str, str, 
         A retroreflective object with a diffuse base (``diffuse_albedo > 0``
         in any scene of the batch) gets a second, Lambertian term with the
         fidelity's ``diffuse_samples`` surface samples; its zero-albedo
-        scenes get exactly zero from it.
+        scenes get exactly zero from it. A support part (``obj.support``:
+        DENALI's mount and plate) is sampled with the fidelity's
+        ``support_samples``.
     lines : list of Term
         A fixture's (it stays in the background capture) and a left-out
         diffuse base's.
     """
     obj = objs[0]
-    parts = [(obj.reflectance, "", "albedo", fid)]
+    parts = [(obj.reflectance, "", "albedo",
+              dataclasses.replace(fid, object_samples=fid.support_samples) if obj.support else fid)]
     lines = []
     if obj.fixture:
         lines.append(Term(True, f"object {obj.name!r}: fixture", "moves with the gantry and stays in the background "

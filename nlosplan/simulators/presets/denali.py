@@ -242,7 +242,7 @@ def denali_scene(obj: str = "A", size: str = "8in", position: int = 19, lights: 
         for mesh, to_world, label in ((mount_mesh(), pose, "object mount"),
                                       (plate_mesh(), denali.plate_pose(pose), "mount plate")):
             objects.append(HiddenObject(mesh=mesh, to_world=to_world, reflectance="lambertian", albedo=mount_albedo,
-                                        name=label, fixture=bool(mount_in_background)))
+                                        name=label, fixture=bool(mount_in_background), support=True))
     xy = denali.tag1_positions()[p, :2]
     meta = {
         "preset": "denali", "object": name, "size": size, "position": p, "class_group": denali.class_group(name),
