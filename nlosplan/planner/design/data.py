@@ -256,8 +256,8 @@ class ReferenceData:
             if rows is not None:
                 raise UserError("real captures cannot be drawn again: a capture is what was captured")
             return degrade_counts(self.counts, d, rng).astype(np.float64)
-        idx = np.arange(len(self.means)) if rows is None else np.asarray(rows, dtype=np.int64)
-        means = self.means[idx]
+        idx = slice(None) if rows is None else np.asarray(rows, dtype=np.int64)
+        means = self.means[idx]   # a view of every scene without rows (no copy of an 8x8 reference)
         if session_seed is not None and self.session_floor_sd:
             shift = self.session_offsets(session_seed)[idx]
             means = np.maximum(means + shift[:, None, None, None], 0.0)
