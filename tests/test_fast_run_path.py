@@ -7,7 +7,8 @@ from nlosplan.sensor_models.presets import resolve_sensor
 from nlosplan.simulators import FastSimulator, denali_scene
 
 
-@pytest.mark.parametrize("options", [{}, {"albedo": 0.36, "diffuse_albedo": 0.2, "mount": True}],
+@pytest.mark.parametrize("options", [{}, pytest.param({"albedo": 0.36, "diffuse_albedo": 0.2, "mount": True},
+                                                      marks=pytest.mark.slow)],   # 68 s; CI runs it
                          ids=["retroreflective", "mixed+mount"])
 def test_cached_chunks_equal_per_call_slices_with_a_padded_last_chunk(options):
     sensor = resolve_sensor("tmf8828-3x3-short")
