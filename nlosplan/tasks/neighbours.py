@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nlosplan.errors import UserError
+from nlosplan.tasks.targets import encode_targets
 
 __all__ = ["K_CHOICES", "NeighbourModel", "fit_neighbours", "root_counts"]
 
@@ -116,22 +117,9 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
     n = len(x)
     if n < 2:
         raise UserError(f"k nearest neighbours need at least 2 training captures, got {n}")
-    names = None
-    if task == "loc":
-        y = np.asarray(targets, dtype=np.float64)
-        if y.shape != (n, 2):
-            raise UserError(f"localization targets must be (N, 2), got {y.shape}")
-        strat = None
-    else:
-        raw = np.asarray(targets).astype(str)
-        if raw.shape != (n,):
-            raise UserError(f"class targets must be (N,), got {raw.shape}")
-        names = tuple(sorted(set(raw))) if classes is None else tuple(str(c) for c in classes)
-        lookup = {c: i for i, c in enumerate(names)}
-        unknown = sorted(set(raw) - set(lookup))
-        if unknown:
-            raise UserError(f"training labels {', '.join(unknown[:5])} are not among the classes")
-        y = np.array([lookup[c] for c in raw], dtype=np.int64)
+    y, names = encode_targets(task, targets, n, classes)
+    strat = None
+    if names is not None:
         _, counts = np.unique(y, return_counts=True)
         strat = y if counts.min() >= 2 else None
     n_val = int(round(val_fraction * n))

@@ -35,6 +35,7 @@ from torch import nn
 from nlosplan.errors import UserError
 from nlosplan.tasks.checkpoints import CHECKPOINT_FORMAT, load_checkpoint, save_checkpoint
 from nlosplan.tasks.models import ModelSpec, model_from_spec
+from nlosplan.tasks.targets import encode_targets
 from nlosplan.tasks.training_types import Preprocessing, TrainConfig, TrainedModel, apply_histogram_transform
 
 __all__ = ["CHECKPOINT_FORMAT", "Preprocessing", "TrainConfig", "TrainedModel", "apply_histogram_transform",
@@ -101,24 +102,8 @@ def train_model(histograms, targets, *, model: str, task: str, config: TrainConf
     x_raw = np.asarray(histograms, dtype=np.float32)
     if x_raw.ndim != 4 or len(x_raw) < 2:
         raise UserError(f"training histograms must be (N >= 2, rows, cols, bins), got {x_raw.shape}")
-    if task == "loc":
-        y_np = np.asarray(targets, dtype=np.float64)
-        if y_np.shape != (len(x_raw), 2):
-            raise UserError(f"localization targets must be (N, 2), got {y_np.shape}")
-        strat_labels, names = None, None
-    else:
-        raw_labels = np.asarray(targets).astype(str)
-        if raw_labels.shape != (len(x_raw),):
-            raise UserError(f"class targets must be (N,), got {raw_labels.shape}")
-        names = tuple(sorted(set(raw_labels))) if classes is None else tuple(str(c) for c in classes)
-        lookup = {c: i for i, c in enumerate(names)}
-        unknown = sorted(set(raw_labels) - set(lookup))
-        if unknown:
-            raise UserError(f"training labels {', '.join(unknown[:5])} are not among the classes")
-        if len(names) < 2:
-            raise UserError(f"classification needs at least 2 classes, got {len(names)}")
-        y_np = np.array([lookup[c] for c in raw_labels], dtype=np.int64)
-        strat_labels = y_np
+    y_np, names = encode_targets(task, targets, len(x_raw), classes)
+    strat_labels = None if names is None else y_np
     fit, val = _validation_rows(len(x_raw), strat_labels, cfg)
     prep = Preprocessing.fit(x_raw[fit], log_transform=cfg.log_transform, normalize=cfg.normalize)
     x_all = torch.from_numpy(prep.apply(x_raw))
