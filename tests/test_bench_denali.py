@@ -124,10 +124,11 @@ def test_bench_denali_knn_cell_on_denalis_split(capsys, synthetic_captures):
     assert rows["loc"]["predicted"] < 0.5 * 0.105     # far better than predicting the mean position
     cell = next(c for c in out["cells"] if c["task"] == "size")
     assert cell["settings"]["k"] in cell["settings"]["k_choices"] and len(cell["history"]) >= 1
+    assert cell["settings"]["components"] in cell["settings"]["component_choices"]
     argv[argv.index("--json")] = "--quiet"
     assert main(argv[:-1]) == 0
     text = capsys.readouterr().out
-    assert "knn: k nearest neighbours on square-root counts" in text and "Table 1 has no such learner" in text
+    assert "knn: k nearest neighbours on principal components of square-root counts" in text and "Table 1 has no such learner" in text
 
 
 def test_full_budget_on_the_cpu_warns_how_long_before_any_work(capsys, monkeypatch):

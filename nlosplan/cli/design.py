@@ -224,7 +224,8 @@ def add(sub) -> None:
     p.add_argument("--models", type=_models, default=None, metavar="M1,M2",
                    help="candidate learners, compared on the reference design; the best per task is used "
                         "(default mlp,cnn1d,knn: DENALI's MLP and 1D CNN as the benchmark trains them, and k nearest "
-                        "neighbours on square-root counts, k chosen on a validation part; also cnn3d, transformer)")
+                        "neighbours on principal components of square-root counts, their number and k chosen on a "
+                        "validation part; also cnn3d, transformer)")
     p.add_argument("--train-captures", type=int_type(2, MAX_TRAIN_CAPTURES), default=None, metavar="N",
                    help="training captures each learner gets at a design (the training budget; a verdict is 'met "
                         "with a 1D CNN trained on N captures'). Default: one per training scene (70 %% of the "

@@ -340,7 +340,7 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
                     progress.stage(f"knn {task}", 1, "fit")
                 res = knn_cell(hist, targets, task)
                 if progress is not None:
-                    progress.set(1, 1, f"k {res.settings['k']}")
+                    progress.set(1, 1, f"k {res.settings['k']}, {res.settings['components']} components")
                 rows.append(_row(res, None, res, protocol, labels))   # its figure is test-blind already
                 cells.append(res.to_dict())
                 continue

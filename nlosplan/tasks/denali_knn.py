@@ -1,8 +1,8 @@
 """k nearest neighbours under DENALI's protocol: a training-free cell beside DENALI's recipe in ``bench denali``.
 
 DENALI's recipe needs about an hour per 1D CNN cell at full budget on 2 CPU cores; the k-nearest-neighbour learner
-of the design planner (:mod:`nlosplan.tasks.neighbours`: square-root counts, k chosen on a seeded 15 % of the
-training captures) takes about a minute on DENALI's 25,200 training captures. :func:`knn_cell` runs it on DENALI's
+of the design planner (:mod:`nlosplan.tasks.neighbours`: principal components of square-root counts, their number
+and k chosen on a seeded 15 % of the training captures) takes about a minute on DENALI's 25,200 training captures. :func:`knn_cell` runs it on DENALI's
 exact split (:func:`~nlosplan.tasks.denali_protocol.denali_split`) and returns the same
 :class:`~nlosplan.tasks.denali_result.CellResult` as a recipe cell, so ``bench denali --models knn`` prints it in the
 same table: with no epochs and k chosen without the test set, its best-on-test, last-epoch and validation-chosen
@@ -40,12 +40,12 @@ def knn_cell(histograms, targets, task: str, *, seed: int = 42) -> CellResult:
     -------
     CellResult
         ``predicted`` = ``predicted_last_epoch`` = ``predicted_validation_epoch`` (test-blind), ``epochs`` 0,
-        ``history`` the validation score of every k tried, ``settings`` ``{"k", "k_choices", "transform"}``;
+        ``history`` the validation score of every k tried, ``settings`` ``{"k", "k_choices", "components", "component_choices", "transform"}``;
         ``n_train`` every training row (all are neighbours), ``n_val`` the share among them that chose k.
     """
     from nlosplan.tasks.denali_protocol import denali_split
     from nlosplan.tasks.metrics import loc_rmse, top1_accuracy
-    from nlosplan.tasks.neighbours import K_CHOICES, fit_neighbours
+    from nlosplan.tasks.neighbours import COMPONENT_CHOICES, K_CHOICES, fit_neighbours
 
     t0 = time.perf_counter()
     x = np.asarray(histograms, dtype=np.float32)
@@ -68,6 +68,8 @@ def knn_cell(histograms, targets, task: str, *, seed: int = 42) -> CellResult:
                       predicted_validation_epoch=float(value), validation_epoch=None, history=tuple(model.history),
                       n_train=int(model.n_train), n_val=int(model.n_val), n_test=int(len(test)),
                       test_index=test, predictions={"best": pred, "last": pred, "validation": pred}, classes=classes,
-                      settings={"k": int(model.k), "k_choices": list(K_CHOICES), "transform": "sqrt(max(counts, 0))"},
+                      settings={"k": int(model.k), "k_choices": list(K_CHOICES), "components": int(model.components),
+                                "component_choices": list(COMPONENT_CHOICES),
+                                "transform": "sqrt(max(counts, 0)), principal components"},
                       preprocessing={"transform": "sqrt"}, seconds=time.perf_counter() - t0, device="cpu",
                       seed=int(seed))

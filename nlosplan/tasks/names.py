@@ -10,8 +10,8 @@ __all__ = ["MODEL_NAMES", "LEARNER_NAMES", "MODEL_LABELS", "model_phrase",
 
 #: The DENALI benchmark models.
 MODEL_NAMES: tuple[str, ...] = ("mlp", "cnn1d", "cnn3d", "transformer")
-#: Every learner the design planner may train: the benchmark models and k nearest neighbours on square-root counts
-#: (:mod:`nlosplan.tasks.neighbours`).
+#: Every learner the design planner may train: the benchmark models and k nearest neighbours on principal components
+#: of square-root counts (:mod:`nlosplan.tasks.neighbours`).
 LEARNER_NAMES: tuple[str, ...] = MODEL_NAMES + ("knn",)
 #: How reports name them, with the article a sentence needs ("met with an MLP trained on ...").
 MODEL_LABELS = {"mlp": ("an", "MLP"), "cnn1d": ("a", "1D CNN"), "cnn3d": ("a", "3D CNN"),

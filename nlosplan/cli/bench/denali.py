@@ -72,7 +72,8 @@ def _text(res: dict, sensor: str) -> str:
             "validation-chosen: " + ("a second run on 90 % of the training rows, its epoch chosen on the other "
                                      "10 %" if res["validation"] else "not run (--no-validation)") +
             "; real: DENALI's Table 1 on real captures."
-            + ("\nknn: k nearest neighbours on square-root counts (no epochs; k chosen on 15 % of the training rows): "
+            + ("\nknn: k nearest neighbours on principal components of square-root counts (no epochs; the components and k "
+               "chosen on 15 % of the training rows): "
                "one test-blind figure in every column; Table 1 has no such learner." if any(
                    r["model"] == "knn" for r in res["rows"]) else "") + "\n"
             f"{res['seconds']:.0f} s on {res['device']} ({res['torch_threads']} torch threads), "
@@ -147,7 +148,8 @@ def add_bench(bsub) -> None:
                         "$NLOSPLAN_CACHE or ~/.cache/nlosplan, in denali-bench/)")
     p.add_argument("--models", type=names_type("model(s)", ("cnn1d", "mlp", "knn")), default=["cnn1d", "mlp"],
                    help="DENALI's cells to train: cnn1d, mlp (default: both); knn adds k nearest neighbours on "
-                        "square-root counts (no epochs, k chosen on a share of the training rows: one test-blind "
+                        "principal components of square-root counts (no epochs; their number and k chosen on a share "
+                        "of the training rows: one test-blind "
                         "figure, about a minute per task at full budget on 2 CPU cores; not in Table 1)")
     p.add_argument("--tasks", type=names_type("task(s)", TASKS), default=list(TASKS),
                    help="loc, shape, size (default: all three)")

@@ -186,7 +186,7 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
     asked = requested(fid)
     x, y, note = training_set(data.train.histograms, data.y_train, asked, seed=seed, stratify=task != Task.LOC,
                               more=None if more is None else (lambda rows: more(data.split.train[rows])))
-    if fid["model"] == "knn":   # no epochs, no width: k is chosen on the same validation share
+    if fid["model"] == "knn":   # no epochs, no width: components and k are chosen on the same validation share
         from nlosplan.tasks.neighbours import fit_neighbours
 
         model = fit_neighbours(x, y, task=task, classes=classes, seed=seed)
@@ -208,7 +208,7 @@ def trained_metric(ds, task: str, fid: dict, seed: int, condition: Condition | N
              "n_train": len(x), "n_fit": int(model.n_train), "n_val": int(model.n_val), "n_test": n,
              "train_seconds": float(model.train_seconds)}
     if knn:
-        extra["k"] = int(model.k)
+        extra["k"], extra["components"] = int(model.k), int(model.components)
     if note:
         extra[TRAIN_NOTE] = note
     if task == Task.LOC:

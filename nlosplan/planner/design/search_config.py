@@ -16,7 +16,8 @@ __all__ = ["SearchConfig", "MAX_SEED", "SEED_STRIDE", "DEFAULT_MODELS"]
 #: ``MAX_SEED`` (:data:`nlosplan.resources.MAX_DESIGN_SEED`, defined once there), so they stay below 2**32.
 SEED_STRIDE = 1000
 #: Candidate learners of the trained evaluator (the best per task is used): DENALI's MLP and 1D CNN cells as the
-#: benchmark trains them, and k nearest neighbours on square-root counts (:mod:`nlosplan.tasks.neighbours`).
+#: benchmark trains them, and k nearest neighbours on principal components of square-root counts
+#: (:mod:`nlosplan.tasks.neighbours`).
 DEFAULT_MODELS = ("mlp", "cnn1d", "knn")
 
 
