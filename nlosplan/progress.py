@@ -59,6 +59,7 @@ class Progress:
         self.every = every
         self.t0 = time.monotonic()
         self._last = self.t0
+        self._rate_from = (self.t0, 0)   # (time, units done) the "s left" estimate counts from
         self._bar = None
         self._printed = False
         if tty is None:
@@ -93,6 +94,8 @@ class Progress:
 
     def set(self, done: int, total: int | None = None, text: str | None = None) -> None:
         """Units done so far (and the total when it becomes known or changes)."""
+        if int(done) < self.done:   # the counts started over: the time left counts from here
+            self._rate_from = (time.monotonic(), 0)
         self.done = int(done)
         if total is not None:
             self.total = int(total)
@@ -121,6 +124,7 @@ class Progress:
             self.unit, self.done, self.total = unit, 0, total
             if self._bar is not None:
                 self._bar.unit = unit
+        self._rate_from = (time.monotonic(), self.done)   # a stage's pace is its own
         if self._bar is not None:
             self._bar.set_description_str(f"{self.desc}: {name}", refresh=True)
         elif self.enabled:
@@ -162,8 +166,10 @@ class Progress:
         else:
             part = f"{self.done} {units}"
         left = ""
-        if self.total and 0 < self.done < self.total and not final:
-            left = f", about {elapsed * (self.total - self.done) / self.done:.0f} s left"
+        since, done0 = self._rate_from
+        if self.total and done0 < self.done < self.total and not final:
+            pace = (time.monotonic() - since) / (self.done - done0)   # seconds per unit in this stage
+            left = f", about {pace * (self.total - self.done):.0f} s left"
         tail = f" - {self.text[:60]}" if self.text and not final else ""
         return f"{head}: {'done, ' if final else ''}{part}, {elapsed:.0f} s{left}{tail}"
 
