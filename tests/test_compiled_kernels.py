@@ -231,3 +231,16 @@ def test_the_switch_turns_it_off_without_a_warning(fresh, monkeypatch):
     assert compiled.status() == (False, f"turned off by {compiled.ENV_SWITCH}=0")
     with pytest.raises(RuntimeError, match="compiled kernels are not available: turned off"):
         compiled.deposit(jnp.zeros(1), jnp.zeros(1), jnp.zeros(1, jnp.int32), 1, 1)
+
+
+def test_on_a_gpu_the_kernels_step_aside_for_xla_without_a_warning(fresh, monkeypatch):
+    """Where JAX computes on a GPU the CPU custom calls cannot run: XLA's own path is used, silently (issue 38)."""
+    monkeypatch.setattr(compiled.jax, "default_backend", lambda: "gpu")
+    monkeypatch.setattr(compiled, "_load", lambda: pytest.fail("loaded the CPU kernels for a GPU"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert default_deposit() == "window"
+        assert compiled.status() == (False, "JAX computes on gpu, and the kernels are CPU-only (XLA's own path runs there)")
+    with deposit_method("kernel"):   # a plan made on a CPU machine, traced where the GPU is
+        out = np.asarray(deposit_at(jnp.asarray([0.25]), jnp.asarray([4.0]), None, 1, 2))
+    np.testing.assert_allclose(out, [[3.0, 1.0]])

@@ -172,6 +172,9 @@ def status() -> tuple[bool, str]:
     """
     if _disabled():
         return False, f"turned off by {ENV_SWITCH}={os.environ.get(ENV_SWITCH)}"
+    backend = jax.default_backend()
+    if backend != "cpu":   # a GPU: the kernels are CPU custom calls; XLA's scatter-add and FFTs run there
+        return False, f"JAX computes on {backend}, and the kernels are CPU-only (XLA's own path runs there)"
     if "ok" not in _STATE:
         try:
             _STATE.update(ok=True, path=_load())
