@@ -181,3 +181,31 @@ def test_observer_bounds_carry_the_thresholds_they_may_stop_at():
     search.ingest([fake_result(j) for j in search.suggest()])
     assert all("stop_at" not in j.fidelity for j in search.optimize_jobs())
     assert search.optimize_jobs() == optimize_jobs(search.evidence, lambda req, d: search.job("bound", req, d))
+
+
+def test_a_learner_far_behind_after_its_first_seed_is_not_trained_again():
+    """Learners stage: every candidate at seed 0, then more seeds only for those whose interval reaches the leader."""
+    offsets = {"mlp": 0.03, "cnn1d": 0.0001, "knn": 0.0}   # loc: the MLP 3 cm behind, the CNN within reach
+
+    def result(job):
+        r = fake_result(job)
+        if job.evaluator == "trained":
+            m = job.fidelity["model"]
+            extra = offsets[m] if job.task == "loc" else -10 * offsets[m]
+            r.update(value=r["value"] + extra, lo=r["lo"] + extra, hi=r["hi"] + extra)
+        return r
+
+    search = DesignSearch(SPACE, [LOC, SIZE], SearchConfig(grid_points=3, refine_steps=0, seeds=3,
+                                                           models=("mlp", "cnn1d", "knn")), REFS)
+    asked = []
+    while search.stage in (Stage.SCREEN, Stage.LEARNERS):
+        jobs = search.suggest()
+        asked += [j for j in jobs if j.evaluator == "trained" and j.design == search.evidence.base]
+        search.ingest([result(j) for j in jobs])
+    ev = search.evidence
+    seeds = {(t, m): sum(j.task == t and j.fidelity["model"] == m for j in asked) for t in ("loc", "size") for m in offsets}
+    assert seeds == {("loc", "mlp"): 1, ("loc", "cnn1d"): 3, ("loc", "knn"): 3,
+                     ("size", "mlp"): 1, ("size", "cnn1d"): 3, ("size", "knn"): 3}
+    assert ev.contenders(LOC) == ("cnn1d", "knn") and ev.learner("loc") == "knn" and ev.learner("size") == "knn"
+    rows = {(r["task"], r["model"]): r for r in summarize(ev)["learners"]}
+    assert rows[("loc", "mlp")]["seeds"] == 1 and not rows[("loc", "mlp")]["chosen"]

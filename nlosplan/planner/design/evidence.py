@@ -204,10 +204,43 @@ class Evidence:
         """The first requirement of each task (its condition is the one learners are compared on)."""
         return list({r.task: r for r in reversed(self.requirements)}.values())[::-1]
 
-    def learner(self, task: Task) -> str:
-        """The task's learner: the candidate model with the best mean metric on the reference design.
+    def contenders(self, req: Requirement) -> tuple[str, ...] | None:
+        """The candidate models still in the running for ``req``'s task on the reference design (None until every
+        candidate has its first seed there).
 
-        Until every candidate has run its seeds there, the first of ``models``.
+        A candidate stays when the optimistic end of its first run's interval reaches the best first figure; the
+        others are not trained at more seeds (a network several centimetres behind the leader after one seed does
+        not become the learner by its third). Failed or non-finite first runs drop out, unless every one did.
+        """
+        models = self.config.models
+        if len(models) == 1:
+            return models
+        first = {m: self.run(Evaluator.TRAINED, req, self.base, 0, model=m) for m in models}
+        if any(r is None for r in first.values()):
+            return None
+        good = {m: r for m, r in first.items() if r.ok and r.finite}
+        if not good:
+            return models
+        if req.smaller_is_better:
+            lead = min(r.value for r in good.values())
+            return tuple(m for m, r in good.items() if not r.lo > lead)   # a NaN end keeps it in
+        lead = max(r.value for r in good.values())
+        return tuple(m for m, r in good.items() if not r.hi < lead)
+
+    def learner_runs(self) -> list[tuple[Requirement, str, int]]:
+        """The learner comparison's runs on the reference design, ``(requirement, model, seed)``: every candidate's
+        first seed, then ``seeds`` seeds of each candidate still in contention (:meth:`contenders`)."""
+        out = []
+        for req in self.task_requirements():
+            models = self.contenders(req)
+            seeds = range(1) if models is None else range(self.config.seeds)
+            out += [(req, m, s) for m in (self.config.models if models is None else models) for s in seeds]
+        return out
+
+    def learner(self, task: Task) -> str:
+        """The task's learner: the candidate model in contention with the best mean metric on the reference design.
+
+        Until every contender has run its seeds there, the first of ``models``.
         """
         if task in self._learners:
             return self._learners[task]
@@ -215,8 +248,11 @@ class Evidence:
         req = next((r for r in self.task_requirements() if r.task == task), None)
         if len(models) == 1 or req is None:
             return models[0]
+        contenders = self.contenders(req)
+        if contenders is None:
+            return models[0]
         means = {}
-        for m in models:
+        for m in contenders:
             recs = [self.run(Evaluator.TRAINED, req, self.base, s, model=m) for s in range(self.config.seeds)]
             if any(r is None for r in recs):
                 return models[0]

@@ -9,8 +9,8 @@ learns is kept in a typed evidence store whose read-only face, :attr:`~DesignSea
 1. **screen** — the fast bounds (CRLB, ideal observer) on one-at-a-time grids along every axis from the
    reference design, and along jitter and photon budget for every zone layout (the trade-off curves,
    :mod:`~nlosplan.planner.design.lines`).
-2. **learners** — every candidate model (``models``: MLP and 1D CNN by default) trained on the reference design
-   over ``seeds`` seeds; the best of each task is its *learner*, used for every trained evaluation after.
+2. **learners** — every candidate model (``models``: MLP, 1D CNN and knn by default) trained on the reference
+   design at one seed, then those still in contention over ``seeds`` seeds; the best of each task is its *learner*.
 3. **curves** — the learner at the grid points whose bound meets the requirement (a design that fails its bound
    fails every model: it is recorded as screened out, not trained). Along the axes the metric is monotone in
    (:data:`~nlosplan.planner.design.lines.MONOTONE`) a line is trained from its costliest end, and stops where
@@ -205,9 +205,7 @@ class DesignSearch:
         return [self.job(Evaluator.BOUND, r, d) for r in self._ev.requirements for d in designs]
 
     def _learners(self) -> list[DesignJob]:
-        ev = self._ev
-        return [self.job(Evaluator.TRAINED, r, ev.base, s, model=m) for r in ev.task_requirements()
-                for m in ev.config.models for s in range(ev.config.seeds)]
+        return [self.job(Evaluator.TRAINED, r, self._ev.base, s, model=m) for r, m, s in self._ev.learner_runs()]
 
     def _curves(self) -> list[DesignJob]:
         """Every bound-passing point of a line, or on a monotone axis the costliest point not yet trained, until
