@@ -161,6 +161,9 @@ def test_a_run_that_meets_nothing_where_denali_does_says_so_beside_its_answer():
     assert why.endswith(loc["answer_note"])
     lead = denali_point_text(res)
     assert "disagree with reality for loc" in lead and "nlosplan bench denali" in lead
+    # the stand-in's bound reaches DENALI's real 4.56 cm there: the learner, not the world, falls short
+    assert f"For {LOC.name} this world's own bound reaches DENALI's real figure, so the shortfall is the learner's" in lead
+    assert "even the bound of this world falls short" not in lead
     assert denali_point_table(res).set_index("requirement").loc[LOC.name, "agrees"] == "NO"
     assert "finds no design" in minimum_hardware_text(res)
 
@@ -186,3 +189,18 @@ def test_a_class_learner_above_the_observer_in_a_world_with_sessions_is_explaine
     assert "capture sessions" not in consistency_text({"consistency": [shape], "world_model": {"session_floor_sd": 0}})
     assert "capture sessions" not in consistency_text({"consistency": [loc],
                                                        "world_model": {"session_floor_sd": 0.01732}})
+
+
+def test_a_real_figure_beyond_the_world_s_bound_blames_the_world_not_the_learner():
+    from nlosplan.reports.denali_section import disagreement_text
+
+    row = {"requirement": LOC.name, "task": "loc", "verdict": NOT_MET, "real_verdict": MET, "agrees": False,
+           "real_in_interval": False, "train_captures": 700, "real": 0.0456, "bound": 0.047,
+           "bound_name": "Cramér–Rao bound", "real_beats_bound": True}
+    said = disagreement_text({"denali_point": [row]})
+    assert said.startswith(f"At DENALI's design this run's verdicts disagree with reality for {LOC.name}")
+    assert "shortfall is the learner's" not in said
+    assert "4.6 cm against the Cramér–Rao bound's 4.7 cm" in said and "the simulated world is harder" in said
+    row.update(real_beats_bound=False, bound=0.031)
+    said = disagreement_text({"denali_point": [row]})
+    assert "shortfall is the learner's (trained on 700 captures" in said and "world is harder" not in said

@@ -94,11 +94,16 @@ def disagreement_text(summary: dict) -> str:
     out = []
     if harder:
         n = max((r["train_captures"] or 0 for r in harder), default=0)
-        budget = f"they train on {n:,} captures for seconds" if n else "they train for seconds"
-        out.append(f"At DENALI's design this run's verdicts disagree with reality for {_names(harder)}: DENALI's "
-                   "hardware meets them; the measured causes are that the simulated world is harder than the real "
-                   "one (`nlosplan bench denali` runs DENALI's own recipe on simulated captures beside Table 1) and "
-                   f"that the design's learners are weaker than DENALI's recipe ({budget}, against {DENALI_RECIPE}).")
+        budget = f"trained on {n:,} captures" if n else "trained here"
+        room = [r for r in harder if not r.get("real_beats_bound")]
+        text = (f"At DENALI's design this run's verdicts disagree with reality for {_names(harder)}: DENALI's "
+                "hardware meets them.")
+        if room:
+            text += (f" For {', '.join(r['requirement'] for r in room)} this world's own bound reaches DENALI's real "
+                     f"figure, so the shortfall is the learner's ({budget}, against {DENALI_RECIPE}), not the "
+                     "world's alone: `nlosplan bench denali` runs DENALI's recipe and the neighbours on this world "
+                     "under DENALI's protocol beside Table 1.")
+        out.append(text)
     if easier:
         out.append(f"At DENALI's design this run is more optimistic than reality for {_names(easier)}: DENALI's "
                    "measured figure does not meet them, so the simulated world or its learner promises more than "
