@@ -101,3 +101,21 @@ def test_bad_training_sets_are_refused():
         fit_neighbours(x, np.array(list("aabbz")), task="size", classes=("a", "b"))
     with pytest.raises(UserError, match=r"histograms must be \(N, rows, cols, bins\)"):
         root_counts(np.ones((5, 4)))
+
+
+def test_the_validation_scores_equal_scikit_learn_s_estimators_at_every_k():
+    """One neighbour search per component count, every k read from it: the same answers as a fit per k."""
+    from sklearn.neighbors import KNeighborsClassifier, KNeighborsRegressor
+
+    from nlosplan.tasks.neighbours import _nearest, _val_score
+
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(300, 6)), rng.normal(size=(80, 6))
+    xy, xy_val = rng.uniform(0, 0.3, (300, 2)), rng.uniform(0, 0.3, (80, 2))
+    cls, cls_val = rng.integers(0, 4, 300), rng.integers(0, 4, 80)
+    order = _nearest(a, b, 15)
+    for k in K_CHOICES:
+        pred = KNeighborsRegressor(k, algorithm="brute").fit(a, xy).predict(b)
+        assert _val_score("loc", xy[order[:, :k]], xy_val) == pytest.approx(np.sqrt(np.mean((pred - xy_val) ** 2)))
+        label = KNeighborsClassifier(k, algorithm="brute").fit(a, cls).predict(b)
+        assert _val_score("shape", cls[order[:, :k]], cls_val) == pytest.approx(np.mean(label != cls_val))
