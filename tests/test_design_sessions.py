@@ -61,6 +61,32 @@ def test_noisy_design_captures_carry_their_session_floor():
         assert np.allclose(low.mean(axis=(1, 2, 3)), (floor + off) * tenth.photon_fraction, atol=2.0)
 
 
+def test_the_observer_s_expected_counts_carry_the_same_sessions():
+    """The ideal observer's templates are the means the learners' captures are drawn from: sessions included."""
+    ref, floor = reference()
+    deg, _ = ref.degradation(ref.sensor)
+    off = ref.session_offsets(seed=4)
+    means = ref.design_means(deg, session_seed=4)
+    np.testing.assert_allclose(means.mean(axis=(1, 2, 3)), floor + off, rtol=1e-6)
+    np.testing.assert_allclose(ref.design_means(deg).mean(axis=(1, 2, 3)), floor, rtol=1e-6)
+    # the noisy captures scatter around exactly these means
+    many = np.mean([ref.design_mean_capture(deg, r, 1, session_seed=4) for r in range(20)], axis=0)
+    assert np.abs(many.mean(axis=(1, 2, 3)) - means.mean(axis=(1, 2, 3))).max() < 1.0
+
+
+def test_a_session_aware_observer_tells_sessions_apart_where_a_plain_one_cannot():
+    """Identical objects in different sessions: only their floors differ; the observer with sessions reads them."""
+    from nlosplan.planner.design.evaluators import _observer
+
+    ref, _ = reference()
+    deg, _ = ref.degradation(ref.sensor)
+    fid = {"draws": 400, "looks": 1}
+    with_sessions = _observer(ref, deg, "shape", fid, 4, None)[0]
+    plain = _observer(reference(sd=0.0)[0], deg, "shape", fid, 4, None)[0]
+    assert plain == pytest.approx(0.5, abs=0.08)       # two identical classes: chance
+    assert with_sessions > 0.9                          # a floor tens of counts apart over 1,152 bins
+
+
 def test_a_reference_file_keeps_its_session_spread(tmp_path):
     ref, _ = reference(sd=0.02)
     loaded = load_reference(ref.save(tmp_path / "ref.npz"))

@@ -200,11 +200,19 @@ class ReferenceData:
         """How to reach ``design_sensor`` from this reference (None and the reason if it cannot)."""
         return reach(self.sensor, design_sensor, counts=self.is_counts)
 
-    def design_means(self, d: Degradation) -> np.ndarray:
-        """Expected counts of the design, (N, R', C', B')."""
+    def design_means(self, d: Degradation, *, session_seed: int | None = None) -> np.ndarray:
+        """Expected counts of the design, (N, R', C', B'); with ``session_seed``, each scene's floor moved by its
+        capture session (:meth:`session_offsets`), as :meth:`design_mean_capture` draws the captures."""
         if self.means is None:
             raise UserError("real captures have no expected counts; the bounds use the simulated reference")
-        return degrade_expected(self.means, d)
+        return degrade_expected(self._session_means(slice(None), session_seed), d)
+
+    def _session_means(self, idx, session_seed: int | None) -> np.ndarray:
+        means = self.means[idx]   # a view of every scene without rows (no copy of an 8x8 reference)
+        if session_seed is not None and self.session_floor_sd:
+            shift = self.session_offsets(session_seed)[idx]
+            means = np.maximum(means + shift[:, None, None, None], 0.0)
+        return means
 
     def session_offsets(self, seed: int) -> np.ndarray:
         """How far each scene's capture session moves the floor, counts per bin of the reference sensor, (N,).
@@ -257,10 +265,7 @@ class ReferenceData:
                 raise UserError("real captures cannot be drawn again: a capture is what was captured")
             return degrade_counts(self.counts, d, rng).astype(np.float64)
         idx = slice(None) if rows is None else np.asarray(rows, dtype=np.int64)
-        means = self.means[idx]   # a view of every scene without rows (no copy of an 8x8 reference)
-        if session_seed is not None and self.session_floor_sd:
-            shift = self.session_offsets(session_seed)[idx]
-            means = np.maximum(means + shift[:, None, None, None], 0.0)
+        means = self._session_means(idx, session_seed)
         return CaptureNoise.of(self.sensor).mean_of_repeats(rng, degrade_expected(means, d), repeats)
 
     def design_crlb(self, d: Degradation) -> tuple[np.ndarray, np.ndarray]:

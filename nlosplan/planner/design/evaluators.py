@@ -94,7 +94,9 @@ def _crlb(ref, deg, repeats: int, condition) -> tuple[float, str]:
 def _observer(ref, deg, task: str, fid: dict, seed: int, condition) -> tuple[float, tuple[float, float], dict]:
     from nlosplan.tasks.ideal_observer import observer_accuracy
 
-    means = ref.design_means(deg)
+    # the observer knows this world's capture sessions, as the learners' training captures of the same seed carry
+    # them (without them a learner that reads a session's floor would beat its "ideal" observer)
+    means = ref.design_means(deg, session_seed=seed)
     lab = ref.labels
     keep = _rows(lab, condition)
     objects = list(dict.fromkeys(lab["object"]))
