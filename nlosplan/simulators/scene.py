@@ -375,8 +375,9 @@ class HiddenObject:
         Part of the rig that holds the hidden object (DENALI's mount and its
         plate): a smooth, secondary addition to the object's signal, so the
         fast simulator samples its surface with the fidelity's
-        ``support_samples`` instead of ``object_samples``
-        (:class:`~nlosplan.simulators.fast.fidelity.Fidelity`).
+        ``support_samples`` instead of ``object_samples`` and lights it
+        through ``support_flash_sub`` wall cells per zone axis instead of
+        ``flash_sub`` (:class:`~nlosplan.simulators.fast.fidelity.Fidelity`).
 
     Notes
     -----
