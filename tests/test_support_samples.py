@@ -57,7 +57,7 @@ def test_support_parts_get_support_samples_and_the_object_keeps_object_samples(s
 
 
 def test_support_flag_with_support_samples_equal_to_object_samples_changes_nothing(sensor):
-    fid = dataclasses.replace(SMALL, support_samples=SMALL.object_samples)
+    fid = dataclasses.replace(SMALL, support_samples=SMALL.object_samples, support_flash_sub=SMALL.flash_sub)
     sc = _mixed_mount(40)
     plain = sc.replace(objects=(sc.objects[0], *(dataclasses.replace(o, support=False) for o in sc.objects[1:])))
     a = FastSimulator(sc, sensor, fidelity=fid, dtype="float64", zones=CENTRE).expected(parts=True)["object"]

@@ -18,7 +18,12 @@ Speed (issue 38, default model ``denali-tmf8828-3x3``: mixed reflectance and
 the mount; ``--objects A,S,O,plus,7 --lights on,off --repeats 3``, 6,000
 captures, cold, a 2-core VM shared with other jobs at load 8-9): 94 s, 64
 captures/s, against the one-group-at-a-time build of before in the same
-session (see ``docs/tasks.md`` for the ratio).
+session (see ``docs/tasks.md`` for the ratio). DENALI's full set (all 30
+objects, ``--lights on,off --repeats 3``: 36,000 captures) on one core
+pinned while other jobs ran on the other, a fresh store: 93 s (387
+captures/s) against 112-128 s before issue 38's fourth pass (the plan's
+geometry once per distinct pose, cheaper scene checks, the mount's coarser
+lit cells; ``docs/fast-simulator.md``).
 
 Determinism
 -----------

@@ -31,7 +31,7 @@ from nlosplan.sensor_models.transient import TimeGrid, irf_extent_ps, move_reach
 from nlosplan.sensor_models.zone_terms import zone_values
 from nlosplan.simulators.fast.fidelity import Fidelity, resolve_fidelity
 from nlosplan.simulators.fast.geometry import direct_returns, trace
-from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, _zone_names, plan_object
+from nlosplan.simulators.fast.plan_object import ObjectPlan, ObjectStatic, _zone_names, distinct_poses, plan_object
 from nlosplan.simulators.meshes import _fine_cells
 from nlosplan.simulators.scene import Scene
 
@@ -263,6 +263,12 @@ def _direct_view_zones(scene: Scene, sensor: SensorConfig, points: np.ndarray) -
     return sorted(set((row * sensor.zones_cols + col).tolist()))
 
 
+def support_fidelity(fid: Fidelity) -> Fidelity:
+    """The knobs a support part (``HiddenObject.support``) is planned with: ``support_samples`` surface samples and
+    ``support_flash_sub`` lit wall cells per zone axis (its detection cells and outer lit cells are the object's)."""
+    return dataclasses.replace(fid, object_samples=fid.support_samples, flash_sub=fid.support_flash_sub)
+
+
 def _object_parts(objs: list, fid: Fidelity) -> tuple[list[tuple[str, str, str, Fidelity]], list[Term]]:
     """The transport terms of one object over a batch, and lines for :func:`explain`.
 
@@ -280,8 +286,7 @@ def _object_parts(objs: list, fid: Fidelity) -> tuple[list[tuple[str, str, str, 
         diffuse base's.
     """
     obj = objs[0]
-    parts = [(obj.reflectance, "", "albedo",
-              dataclasses.replace(fid, object_samples=fid.support_samples) if obj.support else fid)]
+    parts = [(obj.reflectance, "", "albedo", support_fidelity(fid) if obj.support else fid)]
     lines = []
     if obj.fixture:
         lines.append(Term(True, f"object {obj.name!r}: fixture", "moves with the gantry and stays in the background "
@@ -372,10 +377,10 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     # latest possible arrival: direct paths and the farthest object path via the wall's corners
     t_hi = float(path.max()) / C_M_PER_PS if direct else 0.0
     r_wall = float(np.linalg.norm(base.wall.corners() - base.lidar.position, axis=1).max())
-    for sc in scenes:
-        for obj in sc.objects:
-            v = obj.world_vertices()
-            d = np.linalg.norm(base.wall.corners()[:, None] - v[None], axis=-1).max()
+    corners = base.wall.corners()
+    for k in range(len(base.objects)):
+        for obj in distinct_poses([sc.objects[k] for sc in scenes])[0]:
+            d = np.linalg.norm(corners[:, None] - obj.world_vertices()[None], axis=-1).max()
             t_hi = max(t_hi, 2 * (r_wall + float(d)) / C_M_PER_PS)
     grids = [TimeGrid.for_sensor(s, 0.0, t_hi, oversample=fid.time_oversample, sigma_ps=support) for s in sensors]
     first = min(g.first_bin for g in grids)
