@@ -23,6 +23,7 @@ def store(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow  # 28 s and its store; tests/test_tasks_benchmark.py covers the table and the CLI fast, CI runs this
 def test_benchmark_json_has_the_three_task_table_for_the_four_models(store, tmp_path, capsys):
     capsys.readouterr()
     out = tmp_path / "bm"

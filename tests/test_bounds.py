@@ -130,6 +130,7 @@ def test_jacobian_matches_forward_mode_differentiation(lights_on):
         assert np.all(err <= tol), (name, float((err / tol).max()))
 
 
+@pytest.mark.slow  # 28 s; the simulator's mount sharing stays fast (tests/test_fast_share.py), CI runs this
 def test_mount_shared_across_objects_gives_the_unshared_jacobian(monkeypatch):
     """The mount's light at the five displacements, computed once per position, equals each scene's own."""
     scenes = [denali_scene(o, "8in", p, mount=True, mount_in_background=False, albedo=0.4, diffuse_albedo=0.2)

@@ -21,7 +21,7 @@ def _batch(positions, **extra):
             for p in positions]
 
 
-@pytest.mark.parametrize("walk", [0.0, 40.0], ids=["no-walk", "time-walk"])
+@pytest.mark.parametrize("walk", [pytest.param(0.0, marks=pytest.mark.slow), 40.0], ids=["no-walk", "time-walk"])  # no-walk: 30 s, the time-walk case covers it
 def test_mount_is_simulated_once_per_position_and_equals_the_unshared_batch(walk):
     base = resolve_sensor("tmf8828-3x3-short").replace(time_walk_ps=walk)
     sensors = [base, base.replace(jitter_fwhm_ps=150.0, photon_scale=0.5)]

@@ -126,6 +126,7 @@ def test_fit_recovers_known_parameters_from_model_made_statistics():
         assert other.values[k] == pytest.approx(v, rel=0.1), k
 
 
+@pytest.mark.slow  # 28 s; the fit from model-made statistics above stays fast, CI runs this
 def test_fit_recovers_known_parameters_through_the_fast_simulator():
     from nlosplan.calibration.stats_model import components
 
