@@ -65,15 +65,6 @@ def test_support_parts_use_support_flash_sub_lit_cells_and_the_object_keeps_flas
     assert (f.flash_sub, f.object_samples, f.zone_sub, f.flash_outer) == (2, 48, SMALL.zone_sub, SMALL.flash_outer)
 
 
-def test_support_knobs_equal_to_the_objects_change_nothing(sensor):
-    fid = dataclasses.replace(SMALL, support_samples=SMALL.object_samples, support_flash_sub=SMALL.flash_sub)
-    sc = _mixed_mount(40)
-    plain = sc.replace(objects=(sc.objects[0], *(dataclasses.replace(o, support=False) for o in sc.objects[1:])))
-    a = FastSimulator(sc, sensor, fidelity=fid, dtype="float64", zones=CENTRE).expected(parts=True)["object"]
-    b = FastSimulator(plain, sensor, fidelity=fid, dtype="float64", zones=CENTRE).expected(parts=True)["object"]
-    np.testing.assert_array_equal(a, b)
-
-
 @pytest.mark.parametrize("position", [5, 99])
 def test_default_support_flash_sub_keeps_the_mixed_mount_histograms(sensor, position):
     """Against the previous default (the object's 4 lit cells per zone axis for the mount and plate): within

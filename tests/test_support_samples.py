@@ -56,7 +56,8 @@ def test_support_parts_get_support_samples_and_the_object_keeps_object_samples(s
     assert more.plan.paths > sim.plan.paths
 
 
-def test_support_flag_with_support_samples_equal_to_object_samples_changes_nothing(sensor):
+def test_support_flag_with_support_knobs_equal_to_the_objects_changes_nothing(sensor):
+    """support_samples and support_flash_sub equal to the object's: the support flag changes no histogram."""
     fid = dataclasses.replace(SMALL, support_samples=SMALL.object_samples, support_flash_sub=SMALL.flash_sub)
     sc = _mixed_mount(40)
     plain = sc.replace(objects=(sc.objects[0], *(dataclasses.replace(o, support=False) for o in sc.objects[1:])))

@@ -338,7 +338,9 @@ def _check_transform(name: str, m: Any) -> np.ndarray:
         raise UserError(f"{name} to_world must be a finite 4x4 matrix")
     r = m[:3, :3]
     # np.allclose's tests written out (it costs ~20 us a call; datasets build thousands of poses)
-    if not (np.abs(r.T @ r - _EYE3) <= 1e-3 + 1e-5 * _EYE3).all() or not (np.abs(m[3] - _LAST_ROW) <= 1e-8 + 1e-5 * _LAST_ROW).all():
+    orthonormal = (np.abs(r.T @ r - _EYE3) <= 1e-3 + 1e-5 * _EYE3).all()
+    affine = (np.abs(m[3] - _LAST_ROW) <= 1e-8 + 1e-5 * _LAST_ROW).all()
+    if not orthonormal or not affine:
         raise UserError(f"{name} to_world must be a rigid transform (rotation + translation)")
     return m
 
