@@ -39,7 +39,7 @@ from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.evidence import Candidate
 from nlosplan.planner.design.executors import make_executor
 from nlosplan.planner.design.jobs import CatalogJob, ReferenceJob
-from nlosplan.planner.design.optimize import collect_candidates, optimize_choice
+from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, run_optimize
 from nlosplan.planner.design.references import real_reference_path, reference_paths, world_reference_path
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
 from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig, Stage
@@ -487,7 +487,9 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         jobs = search.suggest()
         if not jobs and search.stage is Stage.OPTIMIZE:
             say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
-            log = [r for _, r in executor.map(optimize_choice, search.optimize_jobs())]
+            log = run_optimize(search.optimize_jobs(), cfg.search.candidates,
+                               lambda wave: [r for _, r in executor.map(optimize_choice, wave)],
+                               getattr(executor, "workers", 1))
             cands = collect_candidates(search.evidence, log, cfg.search.candidates)
             ckpt.data.update(candidates=cands, optimize_log=log)
             ckpt.save()
