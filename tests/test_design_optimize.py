@@ -44,20 +44,33 @@ def test_floor_is_the_cheapest_setting_and_bounds_every_design_of_the_choice():
     assert floors[("8x8", 1)] > floors[("3x3", 1)] > floors[("1x1", 1)] and floors[("1x1", 1)] > floors[("1x1", 4)]
 
 
+def lazy_executor(width: int, ran: list, in_flight: list):
+    """Like an executor's ``map(..., ahead=width)``: takes a job only while fewer than ``width`` are in flight,
+    finishes the oldest first."""
+
+    def run(jobs):
+        source, flight = iter(jobs), []
+        while True:
+            while len(flight) < width and (job := next(source, None)) is not None:
+                flight.append(job)
+            in_flight.append(len(flight))
+            if not flight:
+                return
+            job = flight.pop(0)
+            ran.append(job)
+            yield job, fake_choice(job)
+
+    return run
+
+
 @pytest.mark.parametrize("per_task,width", [(1, 1), (2, 2), (2, 3)])
 def test_pruned_choices_could_not_change_the_candidates(per_task, width):
     jobs, ev = _jobs()
-    waves = []
-
-    def run_wave(wave):
-        waves.append(wave)
-        return [fake_choice(j) for j in wave]
-
-    rows = run_optimize(jobs, per_task, run_wave, width)
+    ran, in_flight = [], []
+    rows = run_optimize(jobs, per_task, lazy_executor(width, ran, in_flight))
     full = [fake_choice(j) for j in jobs]
     assert collect_candidates(ev, rows, per_task) == collect_candidates(ev, full, per_task)
-    ran = [j for w in waves for j in w]
-    assert all(0 < len(w) <= width for w in waves) and len(ran) == len({id(j) for j in ran})
+    assert max(in_flight) == width and len(ran) == len({id(j) for j in ran})
     assert [choice_floor(j) for j in ran] == sorted(choice_floor(j) for j in ran)  # cheapest floor first
     pruned = [r for r in rows if r["status"] == "pruned"]
     assert len(pruned) + len(ran) == len(jobs) and len(pruned) >= len(jobs) // 3  # the 8x8 choices at least
@@ -71,7 +84,17 @@ def test_pruned_choices_could_not_change_the_candidates(per_task, width):
     assert any(r["status"] == "infeasible" for r in rows)
 
 
-def test_bad_wave_settings_are_refused():
+def test_more_jobs_in_flight_prune_no_more_than_fewer():
+    jobs, _ = _jobs()
+    counts = []
+    for width in (1, 4, len(jobs)):
+        ran: list = []
+        run_optimize(jobs, 2, lazy_executor(width, ran, []))
+        counts.append(len(ran))
+    assert counts[0] <= counts[1] <= counts[2] == len(jobs)  # all offered at once: nothing can be pruned
+
+
+def test_bad_settings_are_refused():
     jobs, _ = _jobs()
     with pytest.raises(ValueError, match="per_task=0"):
-        run_optimize(jobs, 0, lambda w: [], 1)
+        run_optimize(jobs, 0, lambda js: iter(()))

@@ -37,6 +37,30 @@ def _pid(job) -> int:
     return os.getpid()
 
 
+def _square(job) -> int:
+    return job * job
+
+
+@pytest.mark.parametrize("ahead", [1, 2])
+def test_a_pool_takes_the_next_job_only_when_fewer_than_ahead_are_out(ahead):
+    pool = PoolExecutor(2)
+    taken, yielded = [], []
+
+    def jobs():
+        for j in range(6):
+            taken.append(j)
+            assert len(taken) - len(yielded) <= ahead  # never more than `ahead` out at once
+            yield j
+
+    try:
+        for job, res in pool.map(_square, jobs(), ahead=ahead):
+            yielded.append(job)
+            assert res == job * job
+    finally:
+        pool.close()
+    assert sorted(yielded) == list(range(6)) and taken == list(range(6))
+
+
 def test_recycled_workers_are_fresh_processes():
     pool = PoolExecutor(2)
     try:

@@ -3,7 +3,11 @@
 Every executor takes picklable jobs (:mod:`~nlosplan.planner.design.jobs`)
 and a module-level function and yields ``(job, result)`` as results arrive,
 so the search does not care where they ran. A job that raises is yielded
-with an ``{"status": "failed"}`` result; it never stops the others.
+with an ``{"status": "failed"}`` result; it never stops the others. With
+``ahead=n``, ``map`` takes the next job from ``jobs`` (an iterator may be
+lazy) only while fewer than ``n`` are running or waiting to be yielded, so a
+job stream can look at the results so far before it offers its next job
+(the optimize stage's branch and bound).
 
 ``--cluster tcp://HOST:PORT`` connects to a running Dask scheduler (its
 workers must see the run's output folder, where the reference data lies);
@@ -24,6 +28,9 @@ from nlosplan.planner.design.workers import init_worker
 __all__ = ["make_executor", "init_worker", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
 
 
+_END = object()  # the end of a job stream
+
+
 def _failed(job, exc: BaseException) -> dict:
     """The result record of a job that raised (the job's fields, ``status`` and ``reason``)."""
     return {**job.to_dict(), "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
@@ -35,8 +42,9 @@ class SerialExecutor:
     name = "serial"
     workers = 1
 
-    def map(self, fn: Callable[[Any], dict], jobs: Iterable[Any]) -> Iterator[tuple[Any, dict]]:
-        for job in jobs:
+    def map(self, fn: Callable[[Any], dict], jobs: Iterable[Any], ahead: int | None = None
+            ) -> Iterator[tuple[Any, dict]]:
+        for job in jobs:  # one at a time: every job is offered after the results before it
             try:
                 yield job, fn(job)
             except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
@@ -56,16 +64,27 @@ class PoolExecutor:
         self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
                                          initializer=init_worker, initargs=(os.getpid(),))
 
-    def map(self, fn, jobs):
-        jobs = list(jobs)
-        futures = {self._pool.submit(fn, job): job for job in jobs}
-        pending = set(futures)
+    def map(self, fn, jobs, ahead: int | None = None):
+        source = iter(jobs)
+        futures, pending = {}, set()
+
+        def top_up() -> None:
+            while ahead is None or len(pending) < ahead:
+                job = next(source, _END)
+                if job is _END:
+                    return
+                f = self._pool.submit(fn, job)
+                futures[f] = job
+                pending.add(f)
+
+        top_up()
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in done:
-                job = futures[f]
+                job = futures.pop(f)
                 exc = f.exception()
                 yield job, (_failed(job, exc) if exc else f.result())
+            top_up()
 
     def recycle(self) -> None:
         """Replace the workers by fresh ones (after the simulation stages: what a worker compiled and cached for
@@ -114,18 +133,31 @@ class DaskExecutor:
             raise UserError(f"--cluster {address!r}: give tcp://HOST:PORT or local:N")
         self._client.run(init_worker)
 
-    def map(self, fn, jobs):
+    def map(self, fn, jobs, ahead: int | None = None):
         from dask.distributed import as_completed
 
-        jobs = list(jobs)
-        futures = [self._client.submit(fn, job, pure=False) for job in jobs]
-        index = {f.key: job for f, job in zip(futures, jobs)}
-        for f in as_completed(futures):
-            job = index[f.key]
+        source, index = iter(jobs), {}
+
+        def submit() -> bool:
+            job = next(source, _END)
+            if job is _END:
+                return False
+            f = self._client.submit(fn, job, pure=False)
+            index[f.key] = job
+            queue.add(f)
+            return True
+
+        queue = as_completed([])
+        while (ahead is None or queue.count() < ahead) and submit():
+            pass
+        for f in queue:
+            job = index.pop(f.key)
             try:
                 yield job, f.result()
             except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
                 yield job, _failed(job, exc)
+            while (ahead is None or queue.count() < ahead) and submit():
+                pass
 
     def close(self) -> None:
         self._client.close()

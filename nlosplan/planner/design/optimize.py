@@ -12,7 +12,7 @@ nothing else is evaluated. Jobs are :class:`~nlosplan.planner.design.jobs.Optimi
 
 Only the ``candidates`` cheapest feasible designs per requirement go on
 (:func:`collect_candidates`), so :func:`run_optimize` is a branch and bound:
-it runs the choices in waves, cheapest floor first (a choice's *floor* is the
+it offers the choices to the executor cheapest floor first (a choice's *floor* is the
 cost of its cheapest setting, :func:`choice_floor`: no design of the choice
 costs less), and skips a choice whose floor is above the ``candidates``-th
 cheapest feasible design already found for its requirement -- nothing it
@@ -153,19 +153,19 @@ def _bar(rows: list[dict], requirement: str, per_task: int) -> float:
     return costs[per_task - 1] if len(costs) >= per_task else math.inf
 
 
-def run_optimize(jobs: list[OptimizeJob], per_task: int, run_wave, width: int) -> list[dict]:
-    """Every job's row, by waves of ``width`` jobs, cheapest floor first; a job whose floor is above its
-    requirement's ``per_task``-th cheapest feasible cost found is not run (see the module notes).
+def run_optimize(jobs: list[OptimizeJob], per_task: int, run) -> list[dict]:
+    """Every job's row, cheapest floor first; a job whose floor is above its requirement's ``per_task``-th
+    cheapest feasible cost found so far is not run (see the module notes).
 
     Parameters
     ----------
     jobs : list of OptimizeJob
     per_task : int
         Optimized candidates kept per requirement (``[search] candidates``).
-    run_wave : callable
-        ``run_wave(list of jobs) -> list of rows`` (:func:`optimize_choice`'s, e.g. on an executor).
-    width : int
-        Jobs per wave (the executor's workers).
+    run : callable
+        ``run(job iterator) -> iterator of (job, row)`` (:func:`optimize_choice`'s rows, e.g. an executor's
+        ``map`` with ``ahead`` its workers): it takes a job only when it can start it, so each job is
+        offered after the rows of the jobs finished before it.
 
     Returns
     -------
@@ -173,28 +173,25 @@ def run_optimize(jobs: list[OptimizeJob], per_task: int, run_wave, width: int) -
         The rows run and a ``pruned`` row per skipped job (``status`` ``"pruned"``, ``cost`` NaN, its
         ``floor`` and the ``bar`` it was above, both also said in the ``reason``), in the order decided.
     """
-    if per_task < 1 or width < 1:
-        raise ValueError(f"per_task={per_task} and width={width} must be >= 1")
-    pending = sorted(jobs, key=choice_floor)
+    if per_task < 1:
+        raise ValueError(f"per_task={per_task} must be >= 1")
     rows: list[dict] = []
-    while pending:
-        wave, rest = [], []
-        for job in pending:
+
+    def offered():
+        for job in sorted(jobs, key=choice_floor):
             floor, bar = choice_floor(job), _bar(rows, job.requirement.name, per_task)
-            if floor > bar:
-                rows.append({"requirement": job.requirement.name, "design": None, "cost": math.nan,
-                             "predicted": math.nan, "bound": math.nan, "status": "pruned",
-                             "reason": f"its cheapest setting costs {floor:.2f}, above the {per_task} cheapest "
-                                       f"feasible designs found ({bar:.2f})",
-                             "choice": f"{job.base.layout}, bin x{job.base.bin_factor}", "evaluations": 0,
-                             "seconds": 0.0, "floor": floor, "bar": bar})
-            elif len(wave) < width:
-                wave.append(job)
-            else:
-                rest.append(job)
-        if wave:
-            rows += list(run_wave(wave))
-        pending = rest
+            if floor <= bar:
+                yield job
+                continue
+            rows.append({"requirement": job.requirement.name, "design": None, "cost": math.nan,
+                         "predicted": math.nan, "bound": math.nan, "status": "pruned",
+                         "reason": f"its cheapest setting costs {floor:.2f}, above the {per_task} cheapest "
+                                   f"feasible designs found ({bar:.2f})",
+                         "choice": f"{job.base.layout}, bin x{job.base.bin_factor}", "evaluations": 0,
+                         "seconds": 0.0, "floor": floor, "bar": bar})
+
+    for _, row in run(offered()):
+        rows.append(row)
     return rows
 
 

@@ -488,8 +488,7 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         if not jobs and search.stage is Stage.OPTIMIZE:
             say("optimize: nlopt COBYLA per discrete choice on the corrected bound", done, done)
             log = run_optimize(search.optimize_jobs(), cfg.search.candidates,
-                               lambda wave: [r for _, r in executor.map(optimize_choice, wave)],
-                               getattr(executor, "workers", 1))
+                               lambda jobs: executor.map(optimize_choice, jobs, ahead=executor.workers))
             cands = collect_candidates(search.evidence, log, cfg.search.candidates)
             ckpt.data.update(candidates=cands, optimize_log=log)
             ckpt.save()
