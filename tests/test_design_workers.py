@@ -76,10 +76,10 @@ def test_recycled_workers_are_fresh_processes():
 def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_programs(tmp_path, monkeypatch):
     import jax
 
-    from nlosplan.planner.design import run
+    from nlosplan.planner.design import run, workers
     from nlosplan.planner.design.data import SceneSet
     from nlosplan.planner.design.executors import SerialExecutor
-    from nlosplan.planner.design.jobs import ReferenceJob
+    from nlosplan.planner.design.jobs import CatalogJob, ReferenceJob
     from nlosplan.sensor_models.presets import preset
 
     class Recorded(SerialExecutor):
@@ -88,26 +88,44 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
         def recycle(self):
             self.recycled += 1
 
-    cleared = []
+    cleared, held = [], []
     monkeypatch.setattr(jax, "clear_caches", lambda: cleared.append(1))
-    monkeypatch.setattr(run, "build_reference", lambda job: {"status": "ok", "seconds": 1.0})
+    monkeypatch.setattr(workers, "_HELD", {"programs": None})
+
+    def built(job):
+        held.append((workers._HELD["programs"], len(cleared)))
+        return {"status": "ok", "seconds": 1.0}
+
+    monkeypatch.setattr(run, "build_reference", built)
     scenes = SceneSet(objects=("A",), positions=(0,), repeats=1, crlb_objects=(), fidelity="draft")
-    jobs = [ReferenceJob(str(tmp_path / f"{r}x{r}.npz"), preset("tmf8828-3x3-short").replace(zones_rows=r, zones_cols=r),
-                         scenes, f"{r}x{r}") for r in (1, 3)]
+    sensor = preset("tmf8828-3x3-short")
+    jobs = [ReferenceJob(str(tmp_path / f"w{w}_{r}x{r}.npz"), sensor.replace(zones_rows=r, zones_cols=r), scenes,
+                         f"world {w}, {r}x{r}") for r in (3, 1) for w in (1, 2, 3)]
     ex = Recorded()
-    assert run._simulate(ex, jobs, lambda *a: None, "references", cache=False)[0] == {"3x3": 1.0, "1x1": 1.0}
-    assert ex.recycled == 1 and len(cleared) == 2  # once per stage; every job's programs dropped after it
+    assert run._simulate(ex, jobs, lambda *a: None, "references", cache=False)[0] == {j.label: 1.0 for j in jobs}
+    # the worlds of one layout share the programs; they are dropped before the next layout's first world
+    assert held == [("3x3", 0), ("3x3", 0), ("3x3", 0), ("1x1", 1), ("1x1", 1), ("1x1", 1)]
+    assert ex.recycled == 1  # once per stage that ran
     # nothing to simulate: the workers are kept
     assert run._simulate(ex, [], lambda *a: None, "references", cache=False) == ({}, None)
     assert ex.recycled == 1
-    # a failing job drops its programs too
+    # the catalog never runs beside a layout's programs; in this process, recycling drops what is held
+    monkeypatch.setattr(run, "run_catalog", lambda job: held.append((workers._HELD["programs"], len(cleared))) or {})
+    run._prepare(CatalogJob())
+    assert held[-1] == ("catalog", 2)
+    SerialExecutor().recycle()
+    assert len(cleared) == 3 and workers._HELD["programs"] is None
+    # a failing job leaves its programs held until the next layout's job drops them
     def boom(job):
         raise RuntimeError("boom")
 
     monkeypatch.setattr(run, "build_reference", boom)
     with pytest.raises(RuntimeError, match="boom"):
         run._prepare(jobs[0])
-    assert len(cleared) == 3
+    assert workers._HELD["programs"] == "3x3"
+    monkeypatch.setattr(run, "build_reference", built)
+    run._prepare(jobs[-1])
+    assert held[-1] == ("1x1", 4)
 
 
 def _in_one_worker(fn) -> dict:

@@ -64,3 +64,21 @@ def test_sensors_of_nearby_jitter_share_one_plan_structure_and_its_results_are_t
                              fidelity="draft", dtype="float64").expected()[0]
         own = FastSimulator(scenes, base.replace(jitter_fwhm_ps=j), fidelity="draft", dtype="float64").expected()
         assert np.abs(own - wide).max() <= 1e-9 * np.abs(own).max()
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_to_jax_casts_on_the_host_as_the_device_would(dtype):
+    import jax
+    import jax.numpy as jnp
+
+    from nlosplan.simulators.fast.simulator import to_jax
+
+    rng = np.random.default_rng(0)
+    tree = {"x": rng.normal(size=(4, 3)) * 1e3, "n": np.arange(6, dtype=np.int64), "flag": np.array([True, False]),
+            "scalar": 0.1, "nested": [np.float32(2.5), {"tiny": np.array([1e-300, 1e-40, 3.0])}]}
+    got = to_jax(tree, jnp.dtype(dtype))
+    for a, b in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(tree)):
+        b = np.asarray(b)
+        want = jnp.asarray(b) if b.dtype == bool else jnp.asarray(b, jnp.int32 if b.dtype.kind == "i" else dtype)
+        assert isinstance(a, jax.Array) and a.dtype == want.dtype and a.shape == want.shape
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(want))

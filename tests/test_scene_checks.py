@@ -44,3 +44,24 @@ def test_rigid_transforms_pass_and_others_are_one_line_errors():
         HiddenObject(mesh=mount_mesh(), to_world=_pose(shear))
     with pytest.raises(UserError, match="finite 4x4"):
         HiddenObject(mesh=mount_mesh(), to_world=np.full((4, 4), np.nan))
+
+
+def test_objects_behind_or_through_the_wall_are_refused_and_those_near_it_pass():
+    scene = denali_scene("A", "8in", 0)
+    wall, obj = scene.wall, scene.objects[0]
+    centre, radius = obj.mesh.bounding_sphere
+    assert np.all(np.linalg.norm(obj.mesh.vertices - centre, axis=1) <= radius + 1e-12)
+
+    def at(distance):  # the object's sphere centre this far in front of the wall's plane (negative: behind)
+        m = np.array(obj.to_world, dtype=float)
+        m[:3, 3] += (distance - wall.signed_distance(m[:3, :3] @ centre + m[:3, 3])) * wall.normal
+        return obj.moved_to(m)
+
+    v = at(0.5).world_vertices()
+    extent = float(np.ptp(wall.signed_distance(v))) / 2  # the object's half depth along the wall's normal
+    for d in (0.5, radius + 1e-3, extent + 1e-3):  # far, just clear of the sphere, inside the sphere but clear
+        scene.replace(objects=(at(d),))
+    with pytest.raises(UserError, match="intersects the relay wall"):
+        scene.replace(objects=(at(0.0),))
+    with pytest.raises(UserError, match="lies behind the relay wall"):
+        scene.replace(objects=(at(-0.5),))

@@ -306,6 +306,13 @@ class Mesh:
         return _readonly(np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0))
 
     @functools.cached_property
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """Centre (3,) in the mesh frame and radius (m) of a sphere holding every vertex (the bounding box's
+        centre; not the smallest such sphere)."""
+        c = (self.vertices.min(axis=0) + self.vertices.max(axis=0)) / 2
+        return _readonly(c), float(np.linalg.norm(self.vertices - c, axis=1).max())
+
+    @functools.cached_property
     def content_key(self) -> str:
         """A digest of the vertices and faces (what derived data such as a surface quadrature is cached by)."""
         return hashlib.sha1(self.vertices.tobytes() + b"|" + self.faces.tobytes()).hexdigest()
@@ -513,6 +520,9 @@ class Scene:
 
 
 def _check_object_vs_wall(obj: HiddenObject, wall: Rect) -> None:
+    centre, radius = obj.mesh.bounding_sphere
+    if float(wall.signed_distance(obj.to_world[:3, :3] @ centre + obj.to_world[:3, 3])) > radius:
+        return  # wholly on the lit side: neither behind the wall nor through it (every DENALI scene's objects)
     v = obj.world_vertices()
     s = wall.signed_distance(v)
     if float(s.max()) <= 0:

@@ -23,7 +23,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable, Iterator
 
 from nlosplan.errors import UserError
-from nlosplan.planner.design.workers import init_worker
+from nlosplan.planner.design.workers import init_worker, release_programs
 
 __all__ = ["make_executor", "init_worker", "SerialExecutor", "PoolExecutor", "DaskExecutor"]
 
@@ -49,6 +49,10 @@ class SerialExecutor:
                 yield job, fn(job)
             except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
                 yield job, _failed(job, exc)
+
+    def recycle(self) -> None:
+        """Drop the compiled programs this process holds (the jobs ran here)."""
+        release_programs()
 
     def close(self) -> None:
         """Nothing to release: jobs ran in this process."""
@@ -158,6 +162,10 @@ class DaskExecutor:
                 yield job, _failed(job, exc)
             while (ahead is None or queue.count() < ahead) and submit():
                 pass
+
+    def recycle(self) -> None:
+        """Every worker drops the compiled programs it holds."""
+        self._client.run(release_programs)
 
     def close(self) -> None:
         self._client.close()

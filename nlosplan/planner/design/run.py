@@ -45,6 +45,7 @@ from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requireme
 from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig, Stage
 from nlosplan.planner.design.space import Design, DesignSpace, parse_zones
 from nlosplan.planner.design.summary import summarize
+from nlosplan.planner.design.workers import hold_programs
 from nlosplan.planner.design.worlds import WorldsConfig, draw_worlds, world_sensor
 from nlosplan.sensor_models import resolve_sensor
 
@@ -275,27 +276,28 @@ def _json_default(o):
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
 
 
+def _programs(job) -> str:
+    """What a preparation job compiles: its zone layout's simulator, or the catalog's programs."""
+    return "catalog" if isinstance(job, CatalogJob) else f"{job.sensor.zones_rows}x{job.sensor.zones_cols}"
+
+
 def _prepare(job) -> dict:
     """One job of the preparation stages, on any executor: a reference to simulate, or the stability catalog.
 
-    The programs it compiled are dropped from memory after it (they stay in the on-disk compilation cache): no
-    two jobs of a stage share one, except the worlds', which load it from disk.
+    A process keeps the programs its last job compiled while the next job compiles the same (the worlds'
+    references of one zone layout: tracing them and loading them again from the on-disk cache cost 3 of a 3x3
+    world reference's 8 s) and drops them before a job of another layout or the catalog
+    (:func:`~nlosplan.planner.design.workers.hold_programs`); a stage that ran drops the rest
+    (:func:`_recycle`).
     """
-    import gc
-
-    import jax
-
-    try:
-        return run_catalog(job) if isinstance(job, CatalogJob) else build_reference(job)
-    finally:
-        jax.clear_caches()
-        gc.collect()
+    hold_programs(_programs(job))
+    return run_catalog(job) if isinstance(job, CatalogJob) else build_reference(job)
 
 
 def _recycle(executor) -> None:
-    """Fresh workers for the evaluations after a simulation stage (executors that have them)."""
-    if hasattr(executor, "recycle"):
-        executor.recycle()
+    """After a simulation stage: fresh workers for the evaluations, or the programs dropped where there are none
+    (:meth:`PoolExecutor.recycle` and the others')."""
+    executor.recycle()
 
 
 def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True,

@@ -1,4 +1,5 @@
-"""Start-up of a design worker process: one thread per worker, and an end with the process that started it."""
+"""Start-up of a design worker process: one thread per worker, and an end with the process that started it; the
+compiled programs a process holds between preparation jobs."""
 
 from __future__ import annotations
 
@@ -9,10 +10,33 @@ import time
 
 from nlosplan.resources import THREADS_ENV, keep_freed_memory
 
-__all__ = ["WATCH_PARENT_S", "init_worker"]
+__all__ = ["WATCH_PARENT_S", "init_worker", "hold_programs", "release_programs"]
 
 #: Seconds between a worker's checks that the process which started it is still there.
 WATCH_PARENT_S = 0.5
+
+
+#: What the compiled programs this process holds were compiled for (a zone layout, ``"catalog"``), or None.
+_HELD: dict[str, str | None] = {"programs": None}
+
+
+def release_programs() -> None:
+    """Drop the compiled programs this process holds (they stay in the on-disk compilation cache)."""
+    import gc
+
+    import jax
+
+    jax.clear_caches()
+    gc.collect()
+    _HELD["programs"] = None
+
+
+def hold_programs(key: str) -> None:
+    """Before a job that compiles the programs ``key`` names: keep the programs held when they are those, else
+    drop them (a worker holds one layout's programs at a time: the 8x8 reference's are 2.5-2.9 GB)."""
+    if _HELD["programs"] not in (None, key):
+        release_programs()
+    _HELD["programs"] = key
 
 
 def _exit_with_parent(parent: int) -> None:

@@ -223,6 +223,21 @@ def _check_sensors(sensors: list[SensorConfig]) -> None:
                             "time base in a batch of its own")
 
 
+def _outside_view(scene: Scene, sensor: SensorConfig, objs: list) -> np.ndarray:
+    """Per object, True when its bounding sphere lies wholly behind the LiDAR or beyond a side of its field of
+    view (so none of its points is in view), (len(objs),) bool. Conservative: False says nothing."""
+    centre, radius = np.empty((len(objs), 3)), np.empty(len(objs))
+    for i, obj in enumerate(objs):
+        c, radius[i] = obj.mesh.bounding_sphere
+        centre[i] = obj.to_world[:3, :3] @ c + obj.to_world[:3, 3]
+    x, y, z = scene.lidar.points_to_sensor(centre).T
+    tu, tv = math.tan(math.radians(sensor.fov_x_deg) / 2), math.tan(math.radians(sensor.fov_y_deg) / 2)
+    # signed distances to the pyramid's side planes |x| = tu z and |y| = tv z (positive outside)
+    side_u = (np.abs(x) - tu * z) / math.hypot(1.0, tu)
+    side_v = (np.abs(y) - tv * z) / math.hypot(1.0, tv)
+    return (z + radius < 0) | (side_u > radius) | (side_v > radius)
+
+
 def _dense_world_points(objs: list) -> np.ndarray:
     """Vertices and centroids of small pieces (edges <= 1/16 of the object size) of every pose, (P, 3)."""
     out, seen, posed = [], {}, set()
@@ -238,7 +253,14 @@ def _dense_world_points(objs: list) -> np.ndarray:
             seen[id(mesh)] = np.concatenate([mesh.vertices, cen])
         r, t = obj.to_world[:3, :3], obj.to_world[:3, 3]
         out.append(seen[id(mesh)] @ r.T + t)
-    return np.concatenate(out)
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _in_view_zones(scene: Scene, sensor: SensorConfig, objs: list) -> list[int]:
+    """:func:`_direct_view_zones` of the objects' dense points, skipping the poses wholly out of view
+    (:func:`_outside_view`: a batch of hidden objects costs a sphere test per pose, not thousands of points)."""
+    outside = _outside_view(scene, sensor, objs)
+    return _direct_view_zones(scene, sensor, _dense_world_points([o for o, out in zip(objs, outside) if not out]))
 
 
 def _direct_view_zones(scene: Scene, sensor: SensorConfig, points: np.ndarray) -> list[int]:
@@ -405,7 +427,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
                 obj_plans.append(plan)
                 obj_index.append(k)
                 obj_albedo.append(attr)
-        seen = _direct_view_zones(base, sensor, _dense_world_points(objs))
+        seen = _in_view_zones(base, sensor, objs)
         if seen:
             warnings.append(f"object {obj.name!r} is inside the LiDAR's direct field of view (zones "
                             f"{_zone_names(seen, sensor)}): this is "

@@ -118,14 +118,20 @@ def _stack(items: list[dict]):
 
 
 def to_jax(tree, dtype):
-    """A tree of arrays as JAX arrays: floats in ``dtype``, integers as int32, booleans kept (plans, parameters)."""
+    """A tree of arrays as JAX arrays: floats in ``dtype``, integers as int32, booleans kept (plans, parameters).
+
+    Cast by NumPy, then put on the device as they are: ``jnp.asarray(a, dtype)`` runs a conversion primitive per
+    leaf (0.45 ms each; a world reference's 60 chunks of scene parameters hold 5,400 leaves).
+    """
+    floats = np.dtype(jnp.dtype(dtype).name)
+
     def conv(a):
         a = np.asarray(a)
         if a.dtype == bool:
-            return jnp.asarray(a)
+            return jax.device_put(a)
         if np.issubdtype(a.dtype, np.integer):
-            return jnp.asarray(a, jnp.int32)
-        return jnp.asarray(a, dtype)
+            return jax.device_put(a.astype(np.int32, copy=False))
+        return jax.device_put(a.astype(floats, copy=False))
 
     return jax.tree_util.tree_map(conv, tree)
 
