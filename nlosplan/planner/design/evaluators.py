@@ -61,7 +61,7 @@ __all__ = ["evaluate", "trained_metric", "DEFAULT_FIDELITY"]
 #: Knobs of each evaluator (the error-against-run-time axis of the report). The trained evaluator's
 #: ``model`` is set per task by the search (the run's best learner); "mlp" where none is chosen.
 DEFAULT_FIDELITY: dict[str, dict] = {
-    "bound": {"draws": 400, "looks": 4, "crlb_repeats": 1},
+    "bound": {"draws": 400, "looks": 8, "crlb_repeats": 1},
     "trained": {"model": "mlp", "epochs": 30, "width": 0.25, "repeats": 2, "bootstrap": 200},
 }
 

@@ -57,7 +57,7 @@ def optimize_jobs(evidence, bound_job) -> list[OptimizeJob]:
                 knobs = {k: v for k, v in proto.fidelity.items() if k != "stop_at"}
                 jobs.append(OptimizeJob(req, gap, evidence.space, evidence.cost_model, base,
                                         evidence.config.optimize_evals,
-                                        {**knobs, "draws": max(100, knobs["draws"] // 2)},
+                                        {**knobs, "draws": max(100, knobs["draws"] // 4)},
                                         proto.reference, proto.reference_sensor))
     return jobs
 
