@@ -90,10 +90,10 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
 
     cleared, held = [], []
     monkeypatch.setattr(jax, "clear_caches", lambda: cleared.append(1))
-    monkeypatch.setattr(workers, "_HELD", {"programs": None})
+    monkeypatch.setattr(workers, "_held", None)
 
     def built(job):
-        held.append((workers._HELD["programs"], len(cleared)))
+        held.append((workers._held, len(cleared)))
         return {"status": "ok", "seconds": 1.0}
 
     monkeypatch.setattr(run, "build_reference", built)
@@ -110,11 +110,11 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     assert run._simulate(ex, [], lambda *a: None, "references", cache=False) == ({}, None)
     assert ex.recycled == 1
     # the catalog never runs beside a layout's programs; in this process, recycling drops what is held
-    monkeypatch.setattr(run, "run_catalog", lambda job: held.append((workers._HELD["programs"], len(cleared))) or {})
+    monkeypatch.setattr(run, "run_catalog", lambda job: held.append((workers._held, len(cleared))) or {})
     run._prepare(CatalogJob())
     assert held[-1] == ("catalog", 2)
     SerialExecutor().recycle()
-    assert len(cleared) == 3 and workers._HELD["programs"] is None
+    assert len(cleared) == 3 and workers._held is None
     # a failing job leaves its programs held until the next layout's job drops them
     def boom(job):
         raise RuntimeError("boom")
@@ -122,7 +122,7 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     monkeypatch.setattr(run, "build_reference", boom)
     with pytest.raises(RuntimeError, match="boom"):
         run._prepare(jobs[0])
-    assert workers._HELD["programs"] == "3x3"
+    assert workers._held == "3x3"
     monkeypatch.setattr(run, "build_reference", built)
     run._prepare(jobs[-1])
     assert held[-1] == ("1x1", 4)

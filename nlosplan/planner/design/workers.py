@@ -17,7 +17,7 @@ WATCH_PARENT_S = 0.5
 
 
 #: What the compiled programs this process holds were compiled for (a zone layout, ``"catalog"``), or None.
-_HELD: dict[str, str | None] = {"programs": None}
+_held: str | None = None
 
 
 def release_programs() -> None:
@@ -26,17 +26,19 @@ def release_programs() -> None:
 
     import jax
 
+    global _held
     jax.clear_caches()
     gc.collect()
-    _HELD["programs"] = None
+    _held = None
 
 
 def hold_programs(key: str) -> None:
     """Before a job that compiles the programs ``key`` names: keep the programs held when they are those, else
     drop them (a worker holds one layout's programs at a time: the 8x8 reference's are 2.5-2.9 GB)."""
-    if _HELD["programs"] not in (None, key):
+    global _held
+    if _held not in (None, key):
         release_programs()
-    _HELD["programs"] = key
+    _held = key
 
 
 def _exit_with_parent(parent: int) -> None:
