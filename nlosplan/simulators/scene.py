@@ -440,6 +440,11 @@ class HiddenObject:
         """Mesh vertices in the world frame, shape (V, 3)."""
         return self.mesh.vertices @ self.to_world[:3, :3].T + self.to_world[:3, 3]
 
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """World centre (3,) and radius (m) of a sphere holding the posed mesh (:attr:`Mesh.bounding_sphere`)."""
+        centre, radius = self.mesh.bounding_sphere
+        return self.to_world[:3, :3] @ centre + self.to_world[:3, 3], radius
+
     def moved_to(self, to_world) -> "HiddenObject":
         """Copy at another pose."""
         return dataclasses.replace(self, to_world=to_world)
@@ -520,8 +525,8 @@ class Scene:
 
 
 def _check_object_vs_wall(obj: HiddenObject, wall: Rect) -> None:
-    centre, radius = obj.mesh.bounding_sphere
-    if float(wall.signed_distance(obj.to_world[:3, :3] @ centre + obj.to_world[:3, 3])) > radius:
+    centre, radius = obj.bounding_sphere()
+    if float(wall.signed_distance(centre)) > radius:
         return  # wholly on the lit side: neither behind the wall nor through it (every DENALI scene's objects)
     v = obj.world_vertices()
     s = wall.signed_distance(v)

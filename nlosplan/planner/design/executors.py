@@ -31,6 +31,16 @@ __all__ = ["make_executor", "init_worker", "SerialExecutor", "PoolExecutor", "Da
 _END = object()  # the end of a job stream
 
 
+def _offer(source, ahead: int | None, out, start) -> None:
+    """Start jobs taken from the iterator ``source`` while ``out()`` (jobs running or not yet yielded) is under
+    ``ahead`` (None: all of them)."""
+    while ahead is None or out() < ahead:
+        job = next(source, _END)
+        if job is _END:
+            return
+        start(job)
+
+
 def _failed(job, exc: BaseException) -> dict:
     """The result record of a job that raised (the job's fields, ``status`` and ``reason``)."""
     return {**job.to_dict(), "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
@@ -69,26 +79,21 @@ class PoolExecutor:
                                          initializer=init_worker, initargs=(os.getpid(),))
 
     def map(self, fn, jobs, ahead: int | None = None):
-        source = iter(jobs)
-        futures, pending = {}, set()
+        source, futures, pending = iter(jobs), {}, set()
 
-        def top_up() -> None:
-            while ahead is None or len(pending) < ahead:
-                job = next(source, _END)
-                if job is _END:
-                    return
-                f = self._pool.submit(fn, job)
-                futures[f] = job
-                pending.add(f)
+        def start(job) -> None:
+            f = self._pool.submit(fn, job)
+            futures[f] = job
+            pending.add(f)
 
-        top_up()
+        _offer(source, ahead, lambda: len(pending), start)
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in done:
                 job = futures.pop(f)
                 exc = f.exception()
                 yield job, (_failed(job, exc) if exc else f.result())
-            top_up()
+            _offer(source, ahead, lambda: len(pending), start)
 
     def recycle(self) -> None:
         """Replace the workers by fresh ones (after the simulation stages: what a worker compiled and cached for
@@ -140,28 +145,21 @@ class DaskExecutor:
     def map(self, fn, jobs, ahead: int | None = None):
         from dask.distributed import as_completed
 
-        source, index = iter(jobs), {}
+        source, index, queue = iter(jobs), {}, as_completed([])
 
-        def submit() -> bool:
-            job = next(source, _END)
-            if job is _END:
-                return False
+        def start(job) -> None:
             f = self._client.submit(fn, job, pure=False)
             index[f.key] = job
             queue.add(f)
-            return True
 
-        queue = as_completed([])
-        while (ahead is None or queue.count() < ahead) and submit():
-            pass
+        _offer(source, ahead, queue.count, start)
         for f in queue:
             job = index.pop(f.key)
             try:
                 yield job, f.result()
             except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
                 yield job, _failed(job, exc)
-            while (ahead is None or queue.count() < ahead) and submit():
-                pass
+            _offer(source, ahead, queue.count, start)
 
     def recycle(self) -> None:
         """Every worker drops the compiled programs it holds."""

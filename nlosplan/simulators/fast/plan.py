@@ -228,8 +228,7 @@ def _outside_view(scene: Scene, sensor: SensorConfig, objs: list) -> np.ndarray:
     view (so none of its points is in view), (len(objs),) bool. Conservative: False says nothing."""
     centre, radius = np.empty((len(objs), 3)), np.empty(len(objs))
     for i, obj in enumerate(objs):
-        c, radius[i] = obj.mesh.bounding_sphere
-        centre[i] = obj.to_world[:3, :3] @ c + obj.to_world[:3, 3]
+        centre[i], radius[i] = obj.bounding_sphere()
     x, y, z = scene.lidar.points_to_sensor(centre).T
     tu, tv = math.tan(math.radians(sensor.fov_x_deg) / 2), math.tan(math.radians(sensor.fov_y_deg) / 2)
     # signed distances to the pyramid's side planes |x| = tu z and |y| = tv z (positive outside)
