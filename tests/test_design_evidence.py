@@ -66,10 +66,12 @@ def test_enums_are_their_logged_names():
     from nlosplan.planner.design.progress import STAGES
     from nlosplan.tasks.names import TASKS
 
-    assert tuple(Task) == TASKS and [e.value for e in Evaluator] == ["bound", "trained", "trained_sim"]
+    assert tuple(Task) == TASKS and [e.value for e in Evaluator] == ["bound", "trained", "trained_sim",
+                                                                     "learning_curve"]
     assert json.dumps([Task.LOC, Evaluator.TRAINED_SIM, Status.UNREACHABLE]) == '["loc", "trained_sim", "unreachable"]'
     assert STAGES[1:-2] == tuple(s.value for s in Stage)[:-1] and STAGES[0] == "references"
     assert Evaluator.TRAINED_SIM.knobs == "trained" and not Evaluator.BOUND.trains
+    assert Evaluator.LEARNING_CURVE.knobs == "trained" and Evaluator.LEARNING_CURVE.trains
     assert Requirement("loc", 0.05).task is Task.LOC and Requirement.from_dict(LOC.to_dict()) == LOC
     # the job's key, what resume looks up in old logs, is the one of plain strings
     plain = DesignJob("trained", "size", Design(), 3, {"model": "mlp"}, None, "r.npz", {})

@@ -43,6 +43,9 @@ A verdict is about the sensor and a learner with a training budget: "met with an
 trained on 2,100 captures". --train-captures N sets the budget (training captures per
 learner at a design; default one per training scene: 2,100 in the main job, 700 with
 --quick), --models the learner family; both are in result.json, the report and the summary.
+At the reference design the learner is also trained along a ladder of budgets (a quarter
+and half of the run's, four times it, and DENALI's 25,200 captures; 2 seeds each, 1 with
+--quick; [search] curve_seeds): its learning curve, every point trained, none extrapolated.
 
 Verdicts are met (the pessimistic end of the 95 % interval meets the requirement), not
 met (even the optimistic end fails) or undecided (it straddles). A run of a design at
@@ -58,8 +61,10 @@ captures are reported unreachable; no worlds).
 
 First the answer at DENALI's own design point (3x3, 128 bins of 92.8 ps, no added
 jitter, all photons): each task's predicted metric with its interval, learner and
-training captures, its bound, and DENALI's real Table 1 figure (1D CNN on real
-captures: 4.56 cm, 38.8 %, 94.7 %) with both verdicts and whether they agree; a
+training captures (DENALI's 25,200, as Table 1 trained on, where the learning curve
+reaches them; the run's own budget beside it), its bound, and DENALI's real Table 1
+figure (1D CNN on 25,200 real captures: 4.56 cm, 38.8 %, 94.7 %) with both verdicts and
+whether they agree; a
 sentence where they disagree, and beside an answer that needs more hardware than
 DENALI's although DENALI meets the requirement in reality. A learner that beats its
 bound (Cramer-Rao, ideal observer) beyond its interval is flagged.
@@ -71,7 +76,8 @@ continues from them; a rerun into a folder with a previous run needs --resume or
 JSON: {"train_captures": {"requested", "default", "rule", "learner", "models", "epochs",
 "captures"}, "denali_point": [{"task", "metric", "requirement", "predicted", "interval",
 "evaluator", "learner", "train_captures", "bound", "real", "real_source", "verdict",
-"real_verdict", "agrees", "answer_note"}...], "consistency": [{"task", "design",
+"real_verdict", "agrees", "answer_note", "run_budget", "learning_curve": [{"train_captures",
+"value", "lo", "hi", "seeds", "verdict", "run_budget"}...], "conservative"}...], "consistency": [{"task", "design",
 "learner", "value", "bound", "issue"}...], "cheapest": [{"requirement", "verdict",
 "design", "value", "lo", "hi", "worlds"}...], "requirements": [{"task", "parameter",
 "minimum" or "maximum", "interval", "verdict", "feasible"}...], "learners": [...],

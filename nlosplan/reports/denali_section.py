@@ -10,7 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 __all__ = ["DENALI_TITLE", "CONSISTENCY_TITLE", "denali_point_table", "denali_point_text", "disagreement_text",
-           "consistency_table", "consistency_text", "answer_note", "trained_verdict", "budget_text"]
+           "consistency_table", "consistency_text", "answer_note", "trained_verdict", "budget_text", "curve_text"]
 
 DENALI_TITLE = "At DENALI's own design point"
 CONSISTENCY_TITLE = "Evaluator consistency: learners against their bounds"
@@ -59,6 +59,42 @@ def budget_text(summary: dict) -> str:
     return (f"Training budget: {b['requested']:,} {b['captures']} training captures per learner at a design "
             f"({b['rule']}{sets}), at most {b['epochs']} epochs; learners {learners} (the best of "
             f"{', '.join(map(label, b['models']))} on the reference design).")
+
+
+def _curve_point(task: str, c: dict) -> str:
+    own = " (the run's budget)" if c["run_budget"] else ""
+    return f"{c['train_captures']:,}{own} {_fmt(task, c['value'])}"
+
+
+def curve_text(summary: dict) -> str:
+    """The learners' learning curves at the reference design, one clause per requirement, and what they say of the
+    run's verdicts (``denali_point``'s ``learning_curve``, ``run_budget``, ``conservative``)."""
+    rows = [r for r in summary.get("denali_point", []) if r.get("learning_curve")]
+    if not rows:
+        return ""
+    parts = []
+    for r in rows:
+        task = r["task"]
+        pts = ", ".join(_curve_point(task, c) for c in r["learning_curve"])
+        parts.append(f"{r['requirement']} ({r['learner']}): {pts}")
+    own = next((r["run_budget"]["train_captures"] for r in rows if r.get("run_budget")), None)
+    text = ("Learning curves at this design (training captures: the learner's mean over its seeds; every point "
+            "trained, none extrapolated): " + "; ".join(parts) + ".")
+    at = [r for r in rows if r["evaluator"] == "learning_curve"]
+    if at:
+        text += (f" The prediction above is the learner trained on {at[0]['train_captures']:,} captures, DENALI's "
+                 "Table 1 budget.")
+    if own is not None:
+        worse = [r["requirement"] for r in rows if r.get("conservative") is False]
+        if worse:
+            text += (f" More captures made the learner worse for {', '.join(worse)} on this curve: the run's "
+                     f"verdicts, made at {own:,} captures per design, may promise more than DENALI's budget gives.")
+        elif any(r.get("conservative") for r in rows):
+            text += (f" Every other design is judged with {own:,} captures; here the largest budget leaves the "
+                     "learner no worse (within its interval), so those verdicts look conservative: a design met with "
+                     f"{own:,} captures would be met with DENALI's, and one not met might be met with more captures "
+                     "(not examined at other designs).")
+    return text
 
 
 def denali_point_table(summary: dict) -> pd.DataFrame:
@@ -138,7 +174,8 @@ def denali_point_text(summary: dict) -> str:
     agree = "" if any(r["agrees"] is False for r in rows) else "Every verdict here agrees with DENALI's real result."
     short = [f"{r['requirement']}: {r['train_note']}" for r in rows if r.get("train_note")]
     fewer = f"Fewer training captures than asked: {'; '.join(short)}." if short else ""
-    return " ".join(t for t in (lead, budget_text(summary), agree, fewer, disagreement_text(summary)) if t)
+    return " ".join(t for t in (lead, budget_text(summary), curve_text(summary), agree, fewer,
+                                disagreement_text(summary)) if t)
 
 
 def answer_note(summary: dict, requirement: str) -> str:

@@ -24,7 +24,7 @@ import pandas as pd
 from nlosplan.files import write_text
 from nlosplan.reports.denali_section import (CONSISTENCY_TITLE, DENALI_TITLE, answer_note, budget_text,
                                              consistency_table, consistency_text, denali_point_table,
-                                             denali_point_text, disagreement_text)
+                                             curve_text, denali_point_text, disagreement_text)
 from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
 from nlosplan.reports.realism_section import realism_section
 from nlosplan.reports.tables import format_table, markdown_table
@@ -162,9 +162,9 @@ def _denali_text(summary: dict) -> str:
     t = denali_point_table(summary).drop(columns=["learner"])
     lines = [f"{DENALI_TITLE} (predicted by the learners in the simulated world; DENALI real: Table 1):",
              format_table(t.to_dict("records"))]
-    dis = disagreement_text(summary)
-    if dis:
-        lines.append(dis)
+    for text in (curve_text(summary), disagreement_text(summary)):
+        if text:
+            lines.append(text)
     n = len(summary.get("consistency", []))
     lines.append("evaluators consistent: no learner beats its bound beyond its interval" if not n else
                  f"evaluators INCONSISTENT: {n} learner figure(s) beat their bound beyond their interval (report)")

@@ -22,6 +22,7 @@ keeps the default of the chosen mode)::
     models = ["mlp", "cnn1d"]    # candidate learners (--models); the best per task is used
     max_seeds = 8                # most seeds of an undecided candidate
     budget = 30                  # extra evaluations to decide undecided candidates and rows
+    curve_seeds = 2              # seeds of each learning-curve point at the reference design (0: none)
     [search.fidelity.trained]
     train_captures = 25200       # training captures of each learner (--train-captures; default one per
                                  # training scene: 2,100 here, 700 with --quick)
@@ -70,7 +71,7 @@ def full_config() -> DesignConfig:
     """The main job: all 30 objects, both sizes, 50 positions; the whole default space."""
     from nlosplan.denali import DENALI_OBJECTS
 
-    return DesignConfig(scenes=SceneSet(objects=DENALI_OBJECTS), label="full")
+    return DesignConfig(search=SearchConfig(curve_seeds=2), scenes=SceneSet(objects=DENALI_OBJECTS), label="full")
 
 
 def quick_config() -> DesignConfig:
@@ -81,7 +82,7 @@ def quick_config() -> DesignConfig:
     space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
                         axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
     search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid,
-                          max_seeds=4, budget=16)
+                          max_seeds=4, budget=16, curve_seeds=1)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
     worlds = WorldsConfig(count=4, scene_step=2, candidates=3)
@@ -104,7 +105,8 @@ def _schema() -> dict:
         "requirement": {"task": one_of("loc", "shape", "size"), "threshold": NUMBER, "condition": STRING},
         "cost": {k: number_in(0, 1000) for k in CostModel().to_dict()},   # relative weights (defaults 0.1-0.3)
         "search": {"grid_points": int_in(1, 100), "refine_steps": int_in(0, 20), "seeds": int_in(1, 20),
-                   "candidates": int_in(1, 100), "optimize_evals": int_in(1, 10_000), "fidelity": table_of()},
+                   "candidates": int_in(1, 100), "optimize_evals": int_in(1, 10_000), "curve_seeds": int_in(0, 8),
+                   "fidelity": table_of()},
         "bound": {"draws": count, "looks": count, "crlb_repeats": count},
         "trained": {"model": STRING, "epochs": count, "width": number_in(0, lo_open=True), "repeats": count,
                     "bootstrap": int_in(0), TRAIN_CAPTURES: int_in(2, MAX_TRAIN_CAPTURES)},

@@ -26,6 +26,8 @@ import math
 from nlosplan.planner.design.budget import TRAIN_NOTE
 from nlosplan.planner.design.evaluation import Evaluator
 from nlosplan.planner.design.evidence import Evidence
+from nlosplan.planner.design.learning_curve import (DENALI_TRAIN_CAPTURES, curve_budgets, curve_estimates,
+                                                    curve_rows, curve_summary, run_budget)
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design
 from nlosplan.planner.design.verdicts import MET, NOT_MET, Estimate, seed_interval
@@ -85,7 +87,7 @@ def is_denali_design(d: Design, sensor) -> bool:
 
 def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, train_captures: int | None,
               bound: tuple[float, float, float] | None, real: float | None, real_source: str,
-              captures: str = "simulated", compare: bool = True) -> dict:
+              captures: str = "simulated", compare: bool = True, evaluator: Evaluator = Evaluator.TRAINED) -> dict:
     """One row of ``denali_point``: the run's prediction at DENALI's design beside DENALI's real figure.
 
     Parameters
@@ -108,13 +110,16 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
     compare : bool
         Judge the real figure against the requirement (False where the design is not DENALI's: then
         ``real_verdict``, ``agrees`` and ``real_in_interval`` are None).
+    evaluator : Evaluator
+        Whose runs ``predicted`` is: the learner at the run's budget (``trained``) or at DENALI's budget on the
+        learning curve (``learning_curve``).
 
     Returns
     -------
     dict
         ``task``, ``metric``, ``requirement``, ``threshold``, ``predicted``, ``interval`` ([lo, hi] or None),
-        ``seeds``, ``evaluator`` (``"trained"``), ``learner``, ``captures``, ``train_captures``, ``bound``,
-        ``bound_interval``, ``bound_name``, ``real``, ``real_source``, ``verdict`` (the prediction's; None when
+        ``seeds``, ``evaluator`` (``"trained"`` or ``"learning_curve"``), ``learner``, ``captures``,
+        ``train_captures``, ``bound``, ``bound_interval``, ``bound_name``, ``real``, ``real_source``, ``verdict`` (the prediction's; None when
         not trained), ``real_verdict`` (``met``/``not met`` of the real figure; None without one), ``agrees``
         (None where either verdict is missing), ``real_in_interval`` and ``real_beats_bound`` (the real figure
         lies beyond this world's bound at the design: the simulated world is harder than the real one).
@@ -125,7 +130,7 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
     b = None if bound is None or not math.isfinite(bound[0]) else bound
     return {"task": req.task, "metric": req.metric, "requirement": req.name, "threshold": req.threshold,
             "predicted": None if predicted is None else _num(predicted.value), "interval": interval,
-            "seeds": 0 if predicted is None else predicted.seeds, "evaluator": str(Evaluator.TRAINED),
+            "seeds": 0 if predicted is None else predicted.seeds, "evaluator": str(evaluator),
             "learner": learner, "captures": captures, "train_captures": train_captures,
             "bound": None if b is None else float(b[0]),
             "bound_interval": None if b is None else [_num(b[1]), _num(b[2])],
@@ -190,7 +195,12 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     list of dict
         :func:`point_row`'s fields, plus ``denali_cost`` (the reference design's cost), ``denali_design``
         (whether the reference is DENALI's geometry: where it is not, ``real_verdict`` and ``agrees`` are None),
-        ``answer_note`` and ``train_note`` (why a run had fewer training captures than asked; empty otherwise).
+        ``answer_note`` and ``train_note`` (why a run had fewer training captures than asked; empty otherwise),
+        ``learning_curve`` (:func:`~nlosplan.planner.design.learning_curve.curve_rows`), ``run_budget`` (the
+        learner at the run's own budget, the one every other design is judged with: ``train_captures``,
+        ``value``, ``interval``, ``verdict``; None if not trained) and ``conservative`` / ``curve_gain``
+        (:func:`~nlosplan.planner.design.learning_curve.curve_summary`). Where the curve reached DENALI's 25,200
+        captures, ``predicted`` is the learner there (``evaluator`` ``learning_curve``): Table 1's budget.
     """
     base, space = evidence.base, evidence.space
     denali = is_denali_design(base, space.sensor)
@@ -198,17 +208,24 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     rows = []
     for req, answer in zip(evidence.requirements, cheapest):
         runs = evidence.runs(req, base)
-        n_train = sorted({int(n) for n in (r.extra.get("n_train") for r in runs if r.finite) if n is not None})
+        n_train = sorted({r.n_train for r in runs if r.finite and r.n_train is not None})
         notes = sorted({str(n) for n in (r.extra.get(TRAIN_NOTE) for r in runs if r.finite) if n})
         b = evidence.bound(req, base)
         real, source = real_figure(req)
         if not denali:
             source = f"{source}; not compared: the reference design is not DENALI's 3x3, 128 bins of 92.8 ps"
-        row = point_row(req, seed_interval(req, runs, evidence.spread(req)), learner=evidence.learner(req.task),
-                        train_captures=n_train[-1] if n_train else None,
+        own = seed_interval(req, runs, evidence.spread(req))
+        said = curve_summary(req, curve_estimates(evidence, req))
+        at = said.at_target
+        row = point_row(req, own if at is None else at, learner=evidence.learner(req.task),
+                        train_captures=(n_train[-1] if n_train else None) if at is None else DENALI_TRAIN_CAPTURES,
                         bound=None if b is None or not b.finite else (b.value, b.lo, b.hi),
                         real=real, real_source=source, captures="real" if evidence.has_real else "simulated",
-                        compare=denali)
+                        compare=denali, evaluator=Evaluator.TRAINED if at is None else Evaluator.LEARNING_CURVE)
+        row.update(learning_curve=curve_rows(evidence, req), conservative=said.conservative, curve_gain=said.gain,
+                   run_budget=None if own is None else {
+                       "train_captures": n_train[-1] if n_train else None, "value": _num(own.value),
+                       "interval": [_num(own.lo), _num(own.hi)], "verdict": own.verdict, "seeds": own.seeds})
         a_verdict, a_cost = answer["verdict"], answer["cost"]
         finer = []
         if answer["key"] is not None:
@@ -253,8 +270,8 @@ def bound_conflict(req: Requirement, trained: Estimate, bound: tuple[float, floa
 def consistency(evidence: Evidence) -> list[dict]:
     """Every design where a trained learner beats its task's bound beyond its interval (empty: consistent).
 
-    The task's learner at every design it trained in the nominal model, and every candidate model at the
-    reference design, against the bound of the same design and requirement.
+    The task's learner at every design it trained in the nominal model and at every budget of its learning curve,
+    and every candidate model at the reference design, against the bound of the same design and requirement.
 
     Returns
     -------
@@ -274,6 +291,11 @@ def consistency(evidence: Evidence) -> list[dict]:
                 runs = [evidence.run(Evaluator.TRAINED, req, evidence.base, i, model=m)
                         for i in range(evidence.config.max_seeds)]
                 checks.append((evidence.base, m, [r for r in runs if r is not None]))
+        n_run = run_budget(evidence, req)
+        for n in [] if n_run is None else curve_budgets(n_run, real=evidence.has_real):
+            runs = [evidence.run(Evaluator.LEARNING_CURVE, req, evidence.base, i, budget=n)
+                    for i in range(evidence.config.curve_seeds)]
+            checks.append((evidence.base, f"{learner} on {n:,} captures", [r for r in runs if r is not None]))
         for d, model, runs in checks:
             b, t = evidence.bound(req, d), seed_interval(req, runs, spread)
             if t is None or b is None or not b.finite:

@@ -37,10 +37,14 @@ class Evaluator(StrEnum):
     TRAINED = "trained"
     #: The same learner on the simulated reference, beside real captures (where do sim and real disagree?).
     TRAINED_SIM = "trained_sim"
+    #: The task's learner at the reference design with another training budget (its knob ``train_captures``):
+    #: the learning curve up to DENALI's 25,200 captures (:mod:`~nlosplan.planner.design.learning_curve`).
+    LEARNING_CURVE = "learning_curve"
 
     @property
     def knobs(self) -> str:
-        """The fidelity table it reads (``[search.fidelity.NAME]``): ``trained_sim`` trains as ``trained`` does."""
+        """The fidelity table it reads (``[search.fidelity.NAME]``): ``trained_sim`` and ``learning_curve`` train as
+        ``trained`` does."""
         return "bound" if self is Evaluator.BOUND else "trained"
 
     @property
@@ -145,6 +149,12 @@ class Evaluation:
     def model(self) -> str:
         """The learner it trained (empty for a bound)."""
         return str(self.fidelity.get("model", "")) if self.evaluator.trains else ""
+
+    @property
+    def n_train(self) -> int | None:
+        """The training captures a learner had (``extra["n_train"]``; None for a bound or an old log line)."""
+        n = self.extra.get("n_train")
+        return None if n is None else int(n)
 
     @property
     def place(self) -> Place | None:

@@ -19,6 +19,7 @@ from typing import Iterator
 
 import numpy as np
 
+from nlosplan.planner.design.budget import TRAIN_CAPTURES
 from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluation import Evaluation, Evaluator, Place
 from nlosplan.planner.design.requirements import Condition, Requirement, Task
@@ -29,12 +30,14 @@ from nlosplan.planner.design.verdicts import (MET, UNDECIDED, Estimate, Spread, 
 
 __all__ = ["EvidenceStore", "Evidence", "Candidate", "Gap"]
 
-#: A run's address in the store, its seed aside: (evaluator, task, condition, design, learner, place).
-Cell = tuple[Evaluator, Task, Condition | None, Design, str, Place | None]
+#: A run's address in the store, its seed aside: (evaluator, task, condition, design, learner, place, budget);
+#: the budget is a learning-curve run's training captures (None for every other evaluator: their budget is the run's).
+Cell = tuple[Evaluator, Task, Condition | None, Design, str, Place | None, int | None]
 
 
 def _cell(ev: Evaluation) -> Cell:
-    return ev.evaluator, ev.task, ev.condition, ev.design, ev.model, ev.place
+    budget = int(ev.fidelity[TRAIN_CAPTURES]) if ev.evaluator is Evaluator.LEARNING_CURVE else None
+    return ev.evaluator, ev.task, ev.condition, ev.design, ev.model, ev.place, budget
 
 
 @dataclass(frozen=True)
@@ -177,10 +180,12 @@ class Evidence:
         return self._store.designs(req.task, req.condition)
 
     def run(self, evaluator: Evaluator, req: Requirement, d: Design, i: int = 0, *, model: str | None = None,
-            place: Place | None = None) -> Evaluation | None:
-        """``d``'s ``i``-th run by ``evaluator`` for ``req`` (a learner: ``model``, default the task's learner)."""
+            place: Place | None = None, budget: int | None = None) -> Evaluation | None:
+        """``d``'s ``i``-th run by ``evaluator`` for ``req`` (a learner: ``model``, default the task's learner; a
+        learning-curve run: ``budget``, its training captures)."""
         model = (model or self.learner(req.task)) if evaluator.trains else ""
-        return self._store.get((evaluator, req.task, req.condition, d, model, place), self.config.seed_of(i))
+        budget = int(budget) if evaluator is Evaluator.LEARNING_CURVE else None
+        return self._store.get((evaluator, req.task, req.condition, d, model, place, budget), self.config.seed_of(i))
 
     def runs(self, req: Requirement, d: Design, evaluator: Evaluator = Evaluator.TRAINED) -> list[Evaluation]:
         """The learner's finished runs of ``d`` (nominal model), in seed order."""

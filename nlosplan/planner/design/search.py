@@ -14,7 +14,8 @@ learns is kept in a typed evidence store whose read-only face, :attr:`~DesignSea
 3. **curves** — the learner at the grid points whose bound meets the requirement (a design that fails its bound
    fails every model: it is recorded as screened out, not trained). Along the axes the metric is monotone in
    (:data:`~nlosplan.planner.design.lines.MONOTONE`) a line is trained from its costliest end, and stops where
-   the learner's verdict is *not met*: every cheaper design of the line fails too (recorded as implied).
+   the learner's verdict is *not met*: every cheaper design of the line fails too (recorded as implied); and the
+   learner's learning curve at the reference design (:mod:`~nlosplan.planner.design.learning_curve`).
 4. **refine** — bisection on the continuous axes (jitter, pulse, photons) and bins, between the last grid point
    that meets a requirement and the first that does not, ``refine_steps`` times.
 5. **optimize** — for every discrete choice (zones x bin width) and task, nlopt COBYLA over normalized continuous
@@ -45,6 +46,7 @@ from nlosplan.planner.design.cost import CostModel
 from nlosplan.planner.design.evaluation import Evaluation, Evaluator
 from nlosplan.planner.design.evidence import Candidate, Evidence, EvidenceStore
 from nlosplan.planner.design.jobs import DesignJob, OptimizeJob
+from nlosplan.planner.design.learning_curve import curve_runs, undecided_target_runs, with_budget
 from nlosplan.planner.design.lines import MONOTONE, MORE_IS_BETTER, bracket, line_points, lines, undecided_lines
 from nlosplan.planner.design.optimize import optimize_jobs
 from nlosplan.planner.design.requirements import Requirement, Task
@@ -70,8 +72,7 @@ class Stage(StrEnum):
 
     def after(self, other: "Stage") -> bool:
         """Whether this stage comes after ``other``."""
-        order = list(Stage)
-        return order.index(self) > order.index(other)
+        return list(Stage).index(self) > list(Stage).index(other)
 
 
 class DesignSearch:
@@ -86,8 +87,7 @@ class DesignSearch:
         Zone layout ``"RxC"`` -> path of its saved reference data (simulated).
     cost : CostModel
     trained_references : dict, optional
-        Zone layout -> reference of real captures for the trained evaluator
-        (default: the simulated ``references``).
+        Zone layout -> reference of real captures for the trained evaluators (default: the simulated ones).
     worlds : WorldPlan, optional
         The plausible worlds to check the cheapest met candidates in
         (:class:`~nlosplan.planner.design.robust.WorldPlan`); none: no worlds stage.
@@ -96,7 +96,8 @@ class DesignSearch:
     def __init__(self, space: DesignSpace, requirements, config: SearchConfig, references: dict,
                  cost: CostModel | None = None, trained_references: dict | None = None, worlds=None):
         sims, trained = dict(references), dict(trained_references or references)
-        self._refs = {Evaluator.BOUND: sims, Evaluator.TRAINED: trained, Evaluator.TRAINED_SIM: sims}
+        self._refs = {Evaluator.BOUND: sims, Evaluator.TRAINED: trained, Evaluator.TRAINED_SIM: sims,
+                      Evaluator.LEARNING_CURVE: trained}
         self._store = EvidenceStore()
         self._ev = Evidence(self._store, space, requirements, config, cost or CostModel(), worlds, trained,
                             has_real=trained != sims)
@@ -209,8 +210,9 @@ class DesignSearch:
 
     def _curves(self) -> list[DesignJob]:
         """Every bound-passing point of a line, or on a monotone axis the costliest point not yet trained, until
-        one is not met (one per line and round)."""
-        ev, jobs = self._ev, []
+        one is not met (one per line and round); and the learner's learning curve at the reference design."""
+        ev = self._ev
+        jobs = [with_budget(self.job(Evaluator.LEARNING_CURVE, r, ev.base, i), n) for r, n, i in curve_runs(ev)]
         for req in ev.requirements:
             for line in self._lines:
                 pts = [d for d in line.designs if ev.bound_meets(req, d)]
@@ -284,13 +286,12 @@ class DesignSearch:
                 if len(jobs) < left and job.key not in keys:
                     jobs.append(job)
                     keys.add(job.key)
-        return jobs
+        return jobs + [with_budget(self.job(Evaluator.LEARNING_CURVE, r, ev.base, i), n)
+                       for r, n, i in undecided_target_runs(ev)]
 
     def _worlds(self) -> list[DesignJob]:
-        if self._ev.worlds is None:
-            return []
         jobs = []
-        for run in robust.world_runs(self._ev):
+        for run in [] if self._ev.worlds is None else robust.world_runs(self._ev):
             where = robust.world_target(self._ev, run.world, run.design.layout)
             if where is not None:
                 jobs.append(self.job(Evaluator.TRAINED, run.requirement, run.design, run.index, reference=where[0],

@@ -48,6 +48,10 @@ class SearchConfig:
         Most seeds of one design (and of one design in one world) while it is undecided.
     budget : int
         Extra evaluations the run may spend deciding undecided candidates (decide and worlds stages).
+    curve_seeds : int
+        Seeds of each point of the learner's learning curve at the reference design, up to DENALI's 25,200
+        training captures (:mod:`~nlosplan.planner.design.learning_curve`); 0: no curve (the main job 2,
+        ``--quick`` 1).
     """
 
     grid_points: int = 6
@@ -60,6 +64,7 @@ class SearchConfig:
     models: tuple = DEFAULT_MODELS
     max_seeds: int = 8
     budget: int = 30
+    curve_seeds: int = 0
 
     def __post_init__(self) -> None:
         from nlosplan.tasks.names import LEARNER_NAMES, check_names
@@ -67,7 +72,7 @@ class SearchConfig:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
             raise UserError(f"seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
         for name, lo in (("grid_points", 2), ("refine_steps", 0), ("seeds", 1), ("candidates", 1),
-                         ("optimize_evals", 1), ("budget", 0)):
+                         ("optimize_evals", 1), ("budget", 0), ("curve_seeds", 0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise UserError(f"[search] {name}={v!r} must be a whole number >= {lo}")

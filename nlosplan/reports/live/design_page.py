@@ -25,7 +25,8 @@ X_AXES = {
     "pulse_fwhm_ps": "pulse FWHM (ps)",
     "photon_fraction": "photons (fraction of the reference's)",
 }
-EVALUATOR_COLORS = {"bound": "#1f77b4", "trained": "#d62728", "trained_sim": "#2ca02c"}
+EVALUATOR_COLORS = {"bound": "#1f77b4", "trained": "#d62728", "trained_sim": "#2ca02c",
+                    "learning_curve": "#9467bd"}
 TASK_MARKERS = {"loc": "circle", "shape": "square", "size": "triangle"}
 
 
