@@ -24,7 +24,7 @@ size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up
 32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). About 14 minutes the
 first time on an idle 2-core machine (4 of them simulating the references and compiling;
 the learners, the worlds' references and the optimizer on the bounds are most of the rest;
-11 minutes once the simulator's programs are compiled); --quick runs a reduced space
+12 minutes once the simulator's programs are compiled); --quick runs a reduced space
 (about 2.5 minutes the first time, 1.5 after). References are cached by content: a second run with
 the same sensor model and scenes does not simulate them again.
 
