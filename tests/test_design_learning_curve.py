@@ -190,3 +190,13 @@ def test_the_main_job_and_quick_train_the_curve_and_a_toml_sets_its_seeds(tmp_pa
         load_config(p, full_config())
     with pytest.raises(UserError, match=r"curve_seeds=-1 must be a whole number >= 0"):
         SearchConfig(curve_seeds=-1)
+
+
+def test_the_report_draws_the_curves_and_none_without_them(tmp_path):
+    from nlosplan.reports.design_plots import plot_learning_curves
+
+    res = summarize(_search(Curve())[0].evidence)
+    path = plot_learning_curves(res, tmp_path / "lc.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
+    bare = summarize(_search(Curve(), curve_seeds=0)[0].evidence)  # one point per curve: nothing to draw
+    assert plot_learning_curves(bare, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()

@@ -1,4 +1,4 @@
-"""Figures of the design report: trade-off curves, Pareto fronts, evaluators' error against run time.
+"""Figures of the design report: trade-off curves, Pareto fronts, evaluators' error against run time, learning curves.
 
 Every function takes the summary dict of
 :func:`nlosplan.planner.design.summary.summarize` and a path, draws, saves a
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from nlosplan.reports.figures import pyplot, save_figure
 
-__all__ = ["plot_tradeoffs", "plot_pareto", "plot_evaluators"]
+__all__ = ["plot_tradeoffs", "plot_pareto", "plot_evaluators", "plot_learning_curves"]
 
 _LOG_X = ("photon_fraction", "bin_factor", "zones")
 _AXIS_LABEL = {"zones": "zones (count)", "bin_factor": "bin width (ps)", "n_bins": "bins",
@@ -123,4 +123,35 @@ def plot_evaluators(summary: dict, path) -> Path:
     ax.set_title("evaluators: error against run time (CRLB is exact: shown at 1e-4)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
+    return save_figure(fig, path, tight=True)
+
+
+def plot_learning_curves(summary: dict, path) -> Path | None:
+    """Each requirement's learner at DENALI's design against its training captures (``denali_point``'s
+    ``learning_curve``: mean and 95 % interval), the run's own budget marked, DENALI's real Table 1 figure and the
+    requirement as lines. None (nothing drawn) when no row has a curve of two points or more."""
+    rows = [r for r in summary.get("denali_point", []) if len(r.get("learning_curve") or []) >= 2]
+    if not rows:
+        return None
+    plt = pyplot()
+    fig, axs = plt.subplots(1, len(rows), figsize=(4.4 * len(rows), 3.4), squeeze=False)
+    for ax, r in zip(axs.flat, rows):
+        pts = r["learning_curve"]
+        n = [p["train_captures"] for p in pts]
+        ax.errorbar(n, [p["value"] for p in pts], yerr=[[p["value"] - p["lo"] for p in pts],
+                                                        [p["hi"] - p["value"] for p in pts]],
+                    fmt="-o", color="C3", ms=4, capsize=2, label=f"{r['learner']} (95 % interval)")
+        own = [p for p in pts if p["run_budget"]]
+        if own:
+            ax.plot([own[0]["train_captures"]], [own[0]["value"]], "s", color="k", ms=7, mfc="none",
+                    label="the run's budget (every design)")
+        if r.get("real") is not None:
+            ax.axhline(r["real"], color="C0", lw=1.2, label="DENALI real (Table 1, 25,200 captures)")
+        ax.axhline(r["threshold"], color="0.4", lw=1, ls=":", label="requirement")
+        ax.set_xscale("log")
+        ax.set_xlabel("training captures")
+        ax.set_ylabel(_ylabel(r["requirement"]))
+        ax.set_title(r["requirement"], fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
     return save_figure(fig, path, tight=True)

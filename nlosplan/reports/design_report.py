@@ -25,7 +25,7 @@ from nlosplan.files import write_text
 from nlosplan.reports.denali_section import (CONSISTENCY_TITLE, DENALI_TITLE, answer_note, budget_text,
                                              consistency_table, consistency_text, denali_point_table,
                                              curve_text, denali_point_text, disagreement_text)
-from nlosplan.reports.design_plots import plot_evaluators, plot_pareto, plot_tradeoffs
+from nlosplan.reports.design_plots import plot_evaluators, plot_learning_curves, plot_pareto, plot_tradeoffs
 from nlosplan.reports.realism_section import realism_section
 from nlosplan.reports.tables import format_table, markdown_table
 
@@ -255,6 +255,9 @@ def write_design_report(result: dict, out) -> dict:
         plots[f"trade-offs: {req}"] = plot_tradeoffs(result, req, out / f"tradeoffs_{_slug(req)}.png")
     plots["Pareto fronts"] = plot_pareto(result, out / "pareto.png")
     plots["evaluators: error against run time"] = plot_evaluators(result, out / "evaluators.png")
+    curves = plot_learning_curves(result, out / "learning_curves.png")
+    if curves is not None:
+        plots["learning curves at DENALI's design"] = curves
     prov = result["provenance"]
     answer, reqs = answer_table(result), requirements_table(result)
     stab = result.get("stability") or {}
