@@ -14,9 +14,10 @@ What the curve says (:func:`curve_rows`, :func:`curve_summary`):
 
 - ``denali_point``'s prediction is the learner at DENALI's budget where the curve reaches it (the like-for-like
   comparison with Table 1), and the row keeps the run's own budget's figure beside it;
-- whether the run's verdicts, made at its own budget, are conservative: the metric at the largest budget is not
-  worse than at the run's own (within the intervals), so a design met at the run's budget stays met with more
-  captures on this curve. Where it is worse, the report says so.
+- whether the run's verdicts, made at its own budget, look conservative: the metric at the largest budget is not
+  worse than at the run's own (within its interval), so a design met at the run's budget would stay met with more
+  captures as far as this design's curve shows (other designs' curves are not measured). Where it is worse, the
+  report says so.
 
 Simulated captures above the run's budget are more noisy captures of the same training scenes
 (:func:`~nlosplan.planner.design.budget.training_set`); real captures cannot be drawn again, so with ``--real``
@@ -35,8 +36,8 @@ from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.verdicts import UNDECIDED, Estimate, seed_interval
 
-__all__ = ["DENALI_TRAIN_CAPTURES", "curve_budgets", "run_budget", "curve_runs", "undecided_target_runs", "with_budget", "curve_estimates",
-           "curve_rows", "curve_summary", "CurveSummary"]
+__all__ = ["DENALI_TRAIN_CAPTURES", "curve_budgets", "run_budget", "curve_runs", "undecided_target_runs", "with_budget",
+           "curve_estimates", "curve_rows", "curve_summary", "CurveSummary"]
 
 #: DENALI's training side: 70 % of its 36,000 real captures (paper Table 1's budget).
 DENALI_TRAIN_CAPTURES = 25_200
@@ -101,7 +102,8 @@ def curve_runs(evidence: Evidence) -> list[tuple[Requirement, int, int]]:
 
 def undecided_target_runs(evidence: Evidence, per_round: int = 2) -> list[tuple[Requirement, int, int]]:
     """More seeds at DENALI's budget where the learner is undecided there, as the decide stage gives an undecided
-    candidate: ``(requirement, DENALI_TRAIN_CAPTURES, i)``, ``per_round`` a round, up to ``max_seeds`` seeds."""
+    candidate: ``(requirement, DENALI_TRAIN_CAPTURES, i)``, ``per_round`` a round, up to ``max_seeds`` seeds (not
+    charged to the run's budget of extra evaluations)."""
     out = []
     for req in evidence.requirements:
         at = curve_summary(req, curve_estimates(evidence, req)).at_target
