@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.slow,
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ('[space]\nzones = ["1x1", "3x3"]\nbin_factors = [1, 2]\naxes = ["zones", "jitter_fwhm_ps"]\n'
-        "[search]\ngrid_points = 3\nrefine_steps = 1\nseeds = 1\ncandidates = 1\noptimize_evals = 4\n"
+        "[search]\ngrid_points = 3\nrefine_steps = 1\nseeds = 1\ncandidates = 1\noptimize_evals = 4\ncurve_seeds = 0\n"
         "[search.fidelity.bound]\ndraws = 60\n[search.fidelity.trained]\nepochs = 4\nbootstrap = 50\n"
         '[scenes]\nobjects = ["A", "S", "circle"]\npositions_stride = 10\nrepeats = 1\ncrlb_objects = ["A"]\n'
         'crlb_stride = 5\nfidelity = "draft"\n')
