@@ -163,6 +163,9 @@ def test_a_curve_point_beyond_its_bound_is_flagged():
     flagged = [f for f in res["consistency"] if f["task"] == "loc"]
     assert [f["learner"] for f in flagged] == ["mlp on 25,200 captures"]
     assert "wholly below the Cramér–Rao bound" in flagged[0]["issue"]
+    # the same estimate as the curve's point (every seed it has)
+    point = next(r for r in res["denali_point"] if r["task"] == "loc")["learning_curve"][-1]
+    assert (flagged[0]["value"], flagged[0]["seeds"]) == (pytest.approx(point["value"]), point["seeds"])
 
 
 def test_curve_summary_compares_the_largest_budget_with_the_run_s():

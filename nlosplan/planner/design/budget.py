@@ -34,9 +34,9 @@ import numpy as np
 from nlosplan.errors import UserError
 from nlosplan.resources import MAX_TRAIN_CAPTURES
 
-__all__ = ["TRAIN_CAPTURES", "TRAIN_NOTE", "MAX_TRAIN_CAPTURES", "MIN_TRAIN_CAPTURES", "requested", "check_captures_value", "training_scenes",
-           "default_captures", "check_budget_memory", "Capacity", "real_capacity", "check_real_budget", "training_set", "budget_statement",
-           "TEST_SIZE"]
+__all__ = ["TRAIN_CAPTURES", "TRAIN_NOTE", "MAX_TRAIN_CAPTURES", "MIN_TRAIN_CAPTURES", "requested",
+           "check_captures_value", "training_scenes", "default_captures", "check_budget_memory", "Capacity",
+           "real_capacity", "check_real_budget", "training_set", "budget_statement", "TEST_SIZE"]
 
 #: The trained evaluator's knob (``[search.fidelity.trained] train_captures``).
 TRAIN_CAPTURES = "train_captures"

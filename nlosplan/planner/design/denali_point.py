@@ -26,8 +26,8 @@ import math
 from nlosplan.planner.design.budget import TRAIN_NOTE
 from nlosplan.planner.design.evaluation import Evaluator
 from nlosplan.planner.design.evidence import Evidence
-from nlosplan.planner.design.learning_curve import (DENALI_TRAIN_CAPTURES, curve_budgets, curve_estimates,
-                                                    curve_rows, curve_summary, run_budget)
+from nlosplan.planner.design.learning_curve import (DENALI_TRAIN_CAPTURES, curve_estimates, curve_rows,
+                                                    curve_summary, run_budget)
 from nlosplan.planner.design.requirements import Requirement
 from nlosplan.planner.design.space import Design
 from nlosplan.planner.design.verdicts import MET, NOT_MET, Estimate, seed_interval
@@ -119,10 +119,11 @@ def point_row(req: Requirement, predicted: Estimate | None, *, learner: str, tra
     dict
         ``task``, ``metric``, ``requirement``, ``threshold``, ``predicted``, ``interval`` ([lo, hi] or None),
         ``seeds``, ``evaluator`` (``"trained"`` or ``"learning_curve"``), ``learner``, ``captures``,
-        ``train_captures``, ``bound``, ``bound_interval``, ``bound_name``, ``real``, ``real_source``, ``verdict`` (the prediction's; None when
-        not trained), ``real_verdict`` (``met``/``not met`` of the real figure; None without one), ``agrees``
-        (None where either verdict is missing), ``real_in_interval`` and ``real_beats_bound`` (the real figure
-        lies beyond this world's bound at the design: the simulated world is harder than the real one).
+        ``train_captures``, ``bound``, ``bound_interval``, ``bound_name``, ``real``, ``real_source``, ``verdict``
+        (the prediction's; None when not trained), ``real_verdict`` (``met``/``not met`` of the real figure; None
+        without one), ``agrees`` (None where either verdict is missing), ``real_in_interval`` and
+        ``real_beats_bound`` (the real figure lies beyond this world's bound at the design: the simulated world is
+        harder than the real one).
     """
     verdict = None if predicted is None else predicted.verdict
     real_verdict = None if real is None or not compare else (MET if req.met(real) else NOT_MET)
@@ -208,23 +209,22 @@ def denali_point(evidence: Evidence, cheapest: list[dict]) -> list[dict]:
     rows = []
     for req, answer in zip(evidence.requirements, cheapest):
         runs = evidence.runs(req, base)
-        n_train = sorted({r.n_train for r in runs if r.finite and r.n_train is not None})
         notes = sorted({str(n) for n in (r.extra.get(TRAIN_NOTE) for r in runs if r.finite) if n})
         b = evidence.bound(req, base)
         real, source = real_figure(req)
         if not denali:
             source = f"{source}; not compared: the reference design is not DENALI's 3x3, 128 bins of 92.8 ps"
-        own = seed_interval(req, runs, evidence.spread(req))
+        own, n_run = seed_interval(req, runs, evidence.spread(req)), run_budget(evidence, req)
         said = curve_summary(req, curve_estimates(evidence, req))
         at = said.at_target
         row = point_row(req, own if at is None else at, learner=evidence.learner(req.task),
-                        train_captures=(n_train[-1] if n_train else None) if at is None else DENALI_TRAIN_CAPTURES,
+                        train_captures=n_run if at is None else DENALI_TRAIN_CAPTURES,
                         bound=None if b is None or not b.finite else (b.value, b.lo, b.hi),
                         real=real, real_source=source, captures="real" if evidence.has_real else "simulated",
                         compare=denali, evaluator=Evaluator.TRAINED if at is None else Evaluator.LEARNING_CURVE)
         row.update(learning_curve=curve_rows(evidence, req), conservative=said.conservative, curve_gain=said.gain,
                    run_budget=None if own is None else {
-                       "train_captures": n_train[-1] if n_train else None, "value": _num(own.value),
+                       "train_captures": n_run, "value": _num(own.value),
                        "interval": [_num(own.lo), _num(own.hi)], "verdict": own.verdict, "seeds": own.seeds})
         a_verdict, a_cost = answer["verdict"], answer["cost"]
         finer = []
@@ -285,19 +285,16 @@ def consistency(evidence: Evidence) -> list[dict]:
             continue
         seen.add((req.task, req.condition))
         spread, learner = evidence.spread(req), evidence.learner(req.task)
-        checks = [(d, learner, evidence.runs(req, d)) for d in evidence.designs(req)]
+        checks = [(d, learner, seed_interval(req, evidence.runs(req, d), spread)) for d in evidence.designs(req)]
         for m in evidence.config.models:
             if m != learner:
                 runs = [evidence.run(Evaluator.TRAINED, req, evidence.base, i, model=m)
                         for i in range(evidence.config.max_seeds)]
-                checks.append((evidence.base, m, [r for r in runs if r is not None]))
-        n_run = run_budget(evidence, req)
-        for n in [] if n_run is None else curve_budgets(n_run, real=evidence.has_real):
-            runs = [evidence.run(Evaluator.LEARNING_CURVE, req, evidence.base, i, budget=n)
-                    for i in range(evidence.config.curve_seeds)]
-            checks.append((evidence.base, f"{learner} on {n:,} captures", [r for r in runs if r is not None]))
-        for d, model, runs in checks:
-            b, t = evidence.bound(req, d), seed_interval(req, runs, spread)
+                checks.append((evidence.base, m, seed_interval(req, [r for r in runs if r is not None], spread)))
+        checks += [(evidence.base, f"{learner} on {n:,} captures", e)
+                   for n, e, own in curve_estimates(evidence, req) if not own]
+        for d, model, t in checks:
+            b = evidence.bound(req, d)
             if t is None or b is None or not b.finite:
                 continue
             issue = bound_conflict(req, t, (b.value, b.lo, b.hi))
