@@ -220,16 +220,28 @@ def test_read_frame_times_out_without_a_complete_frame():
 
 
 # ----------------------------------------------------------------- the emulator prints what the firmware prints
-def _say(ser, ch: bytes, wait: float = 0.15) -> list[str]:
-    """Send ``ch``, collect what arrives for ``wait`` seconds; the complete lines."""
+def _has_state(lines: list[str]) -> bool:
+    """Whether a reply is complete: printState()'s ``... state=...`` line ends every command's reply."""
+    return any(" state=" in ln for ln in lines)
+
+
+def _say(ser, ch: bytes, wait: float = 0.15, until=_has_state, deadline: float = 20.0) -> list[str]:
+    """Send ``ch``; the complete lines that arrive in at least ``wait`` seconds and until ``until(lines)`` holds.
+
+    Reading to a condition, not for a fixed time alone, keeps the test exact on a loaded machine (a CI run with
+    two workers once read nothing within 0.3 s of the emulator's start); ``deadline`` seconds bound the wait.
+    """
     import time
 
     ser.write(ch)
-    got, end = bytearray(), time.monotonic() + wait
-    while time.monotonic() < end:
+    got, start = bytearray(), time.monotonic()
+    while True:
         got += ser.read(1 << 16)
+        lines = got.decode().split("\n")[:-1]
+        waited = time.monotonic() - start
+        if (waited >= wait and until(lines)) or waited >= deadline:
+            return lines
         time.sleep(0.005)
-    return got.decode().split("\n")[:-1]
 
 
 def test_emulator_answers_o_and_O_with_the_firmwares_own_lines():
@@ -243,7 +255,7 @@ def test_emulator_answers_o_and_O_with_the_firmwares_own_lines():
     with EmulatedTMF8828(lambda z, r: (np.zeros((int(z[0]), int(z[0]), 128)), 100.0)) as emu:
         ser = serial.Serial(emu.port, 115200, timeout=0)
         try:
-            boot = _say(ser, b"", 0.3)
+            boot = _say(ser, b"", 0.3, until=lambda ls: "# ... reset" in ls)
             assert boot[0] == "TMF8828 Arduino Driver" and boot[-1] == "# ... reset"   # setupFn's help screen
             assert _say(ser, b"d") == ["TMF8828 state=disabled"]
             # the device is off: the mode switch's register check times out (driver log level ERROR at start-up)
@@ -264,6 +276,12 @@ def test_emulator_answers_o_and_O_with_the_firmwares_own_lines():
             assert _say(ser, b"m", 0.05)[0] == "TMF8828 state=measure"
         finally:
             ser.close()
+
+
+def _one_whole_result(lines: list[str]) -> bool:
+    """Whether ``lines`` hold a result from its first #Cal dump to its #Obj line."""
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("#Cal,65,0,")]
+    return bool(starts) and any(ln.startswith("#Obj") for ln in lines[starts[0]:])
 
 
 def test_emulator_prints_a_result_as_the_recording_does(recording):
@@ -290,7 +308,7 @@ def test_emulator_prints_a_result_as_the_recording_does(recording):
             for ch in b"doEczzz":              # 4x4 (two dumps per result), dump mode 3 (calibration and raw)
                 _say(ser, bytes([ch]), 0.05)
             assert emu.dump_mode == 3 and emu.zones is ZoneMode.Z4X4
-            lines = _say(ser, b"m", 0.5)
+            lines = _say(ser, b"m", 0.5, until=_one_whole_result)
         finally:
             ser.close()
     start = next(i for i, ln in enumerate(lines) if ln.startswith("#Cal,65,0,"))
