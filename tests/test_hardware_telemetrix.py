@@ -18,6 +18,17 @@ from nlosplan.hardware.telemetrix_config import (DEFAULT_RIG_FILE, DENALI_STEPS_
 from nlosplan.hardware.transcript import TranscriptSerial
 from nlosplan.hardware.transport import DeviceTimeout
 
+
+def _eventually(check, timeout: float = 10.0) -> bool:
+    """Poll ``check()`` until it holds or ``timeout`` seconds pass; its last value.
+
+    The emulator runs in its own thread: a fixed sleep before an assertion reads nothing on a loaded machine.
+    """
+    end = time.monotonic() + timeout
+    while not (ok := check()) and time.monotonic() < end:
+        time.sleep(0.01)
+    return ok
+
 H = bytes.fromhex
 # [length, type, data...]: length counts the type byte and the data (Telemetrix4Arduino get_next_command)
 OPEN = [
@@ -149,12 +160,10 @@ def test_firmware_arithmetic_buffer_and_command_table_as_on_the_avr():
         g._write(tp.packet(tp.Cmd.STEPPER_MOVE_TO, 0, *tp.magnitude32(40000)))
         g._write(tp.packet(tp.Cmd.STEPPER_MOVE_TO, 1, *tp.magnitude32(32768)))
         g._write(tp.packet(tp.Cmd.STEPPER_SET_MAX_SPEED, 0, 0xFF, 0xFF))
-        time.sleep(0.1)
-        assert (s0.target, emu.steppers[1].target, s0.max_speed) == (-25536, -32768, 1.0)
+        assert _eventually(lambda: (s0.target, emu.steppers[1].target, s0.max_speed) == (-25536, -32768, 1.0))
         g._write(tp.packet(tp.Cmd.STEPPER_MOVE_TO, 0, *tp.magnitude32(32767)))
         g._write(tp.packet(tp.Cmd.STEPPER_MOVE_TO, 1, *tp.magnitude32(-32767)))
-        time.sleep(0.1)
-        assert (s0.target, emu.steppers[1].target) == (32767, -32767)   # within +-32,767 as sent
+        assert _eventually(lambda: (s0.target, emu.steppers[1].target) == (32767, -32767))   # within +-32,767 as sent
         # the packet builders refuse what the firmware cannot decode
         with pytest.raises(tp.PacketError, match="16-bit AVR int: -32767..32767 steps"):
             tp.move_to(0, 32768)
@@ -163,15 +172,16 @@ def test_firmware_arithmetic_buffer_and_command_table_as_on_the_avr():
         # a command id past the 58-entry table: no answer, ever, until a reset
         g._write(tp.packet(58))
         g._write(tp.get_current_position(0))
+        assert _eventually(lambda: "command id 58 is past the firmware's 58-entry command table" in (emu.hung or ""))
         time.sleep(0.2)
-        assert "command id 58 is past the firmware's 58-entry command table" in emu.hung and emu.queued() == 0
+        assert emu.queued() == 0                                 # and the position request after it goes unanswered
         g.close()
         g = TelemetrixGantry(emu.port, **QUICK_DRIVER)           # reopening resets it
         g.connect()
         # more than 30 data bytes overrun the command buffer (a GRBL '?' = a 63-byte packet)
         g._write(b"?" + bytes(63))                             # the length, a command byte, 62 data bytes
-        time.sleep(0.2)
-        assert "62 data bytes (length byte 63) overran the firmware's 30-byte command buffer" in emu.hung
+        assert _eventually(lambda: "62 data bytes (length byte 63) overran the firmware's 30-byte command buffer"
+                           in (emu.hung or ""))
         g.close()
 
 
@@ -215,9 +225,8 @@ def test_the_shared_enable_pin_is_driven_enabled_after_prepare():
             g._write(tp.set_pin_mode_stepper(motor, ax.step_pin, ax.dir_pin))
             g._write(tp.set_enable_pin(motor, 8))
             g._write(tp.set_3_pins_inverted(motor, enable=True))
-        time.sleep(0.1)
         # setEnablePin wrote HIGH before the inversion was set: the CNC shield's active-low drivers are off
-        assert emu.pins[8] == 1 and not emu.drivers_enabled(8)
+        assert _eventually(lambda: emu.pins.get(8) == 1 and not emu.drivers_enabled(8))
         g.close()
         g = TelemetrixGantry(emu.port, **QUICK_DRIVER)
         g.prepare()
