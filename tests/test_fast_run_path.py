@@ -66,6 +66,30 @@ def test_sensors_of_nearby_jitter_share_one_plan_structure_and_its_results_are_t
         assert np.abs(own - wide).max() <= 1e-9 * np.abs(own).max()
 
 
+def test_a_plan_sized_for_a_wider_sigma_shares_its_structure_and_keeps_its_results():
+    # a design run's worlds: each world's reference is planned for the largest world sigma (min_support_sigma_ps),
+    # so worlds whose own sigmas round to different supports (100 and 50 ps here) run one compiled program
+    from nlosplan.errors import UserError
+    from nlosplan.simulators import expected_batch
+    from nlosplan.simulators.fast.plan import build_plan
+
+    base = resolve_sensor("tmf8828-3x3-short")
+    scenes = [denali_scene("A", "8in", 10, albedo=0.36, diffuse_albedo=0.2)]
+    narrow, wide = base.replace(jitter_fwhm_ps=60.0), base.replace(jitter_fwhm_ps=140.0)
+    assert build_plan(scenes, narrow, "draft").static != build_plan(scenes, wide, "draft").static
+    sigma = wide.impulse_sigma_ps
+    sized = FastSimulator(scenes, narrow, fidelity="draft", min_support_sigma_ps=sigma)
+    assert sized.plan.static == FastSimulator(scenes, wide, fidelity="draft", min_support_sigma_ps=sigma).plan.static
+    own = FastSimulator(scenes, narrow, fidelity="draft", dtype="float64").expected()
+    got = expected_batch(scenes, narrow, fidelity="draft", dtype="float64", min_support_sigma_ps=sigma).expected[0]
+    assert np.abs(own - got).max() <= 1e-9 * np.abs(own).max() and own.max() > 0
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(UserError, match="min_support_sigma_ps=.* must be a finite number >= 0"):
+            build_plan(scenes, narrow, "draft", min_support_sigma_ps=bad)
+    with pytest.raises(UserError, match="min_support_sigma_ps sizes a fast-backend plan; backend 'mitsuba' has none"):
+        expected_batch(scenes, narrow, backend="mitsuba", min_support_sigma_ps=sigma)
+
+
 @pytest.mark.parametrize("dtype", ["float32", "float64"])
 def test_to_jax_casts_on_the_host_as_the_device_would(dtype):
     import jax

@@ -168,7 +168,7 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
 
 def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidelity="default", zones=None,
                    dtype="float32", prune: bool = True, parts: bool = False, chunk: int | None = None,
-                   progress=None, pad_to: SimPlan | None = None) -> BatchResult:
+                   progress=None, pad_to: SimPlan | None = None, min_support_sigma_ps: float = 0.0) -> BatchResult:
     """Expected counts of a batch of scenes under one sensor.
 
     The fast backend runs the whole list through one simulator: scenes that share the rig and the objects'
@@ -191,6 +191,9 @@ def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidel
     pad_to : SimPlan, optional
         Fast backend: the ``plan`` of a batch run before; this batch's sizes are padded to it where smaller, so a
         sweep of batches (objects, positions) runs one compiled program (results equal within float32 rounding).
+    min_support_sigma_ps : float
+        Fast backend: plan the impulse response's support for at least this Gaussian sigma (ps), so batches of
+        sensors with different jitter run one compiled program (equal within float32 rounding).
 
     Returns
     -------
@@ -202,7 +205,11 @@ def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidel
     _check_sensor(sensor)
     if pad_to is not None and check_backend(backend) != "fast":
         raise UserError(f"pad_to is a fast-backend plan; backend {backend!r} has none")
+    if min_support_sigma_ps and check_backend(backend) != "fast":
+        raise UserError(f"min_support_sigma_ps sizes a fast-backend plan; backend {backend!r} has none")
     extra = {} if pad_to is None else {"pad_to": pad_to}
+    if min_support_sigma_ps:
+        extra["min_support_sigma_ps"] = float(min_support_sigma_ps)
     return BACKENDS[check_backend(backend)].expected_batch(scenes, sensor, fidelity=fidelity, zones=zones, dtype=dtype,
                                                            prune=prune, parts=parts, chunk=chunk, progress=progress,
                                                            **extra)

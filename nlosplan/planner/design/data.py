@@ -313,7 +313,8 @@ def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(REFERENCE_COLUMNS))
 
 
-def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None) -> ReferenceData:
+def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
+                       min_support_sigma_ps: float = 0.0) -> ReferenceData:
     """Simulate the reference histograms of one zone layout (the scene set's backend; the bound scenes: fast).
 
     Parameters
@@ -323,6 +324,10 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
     scenes : SceneSet
     progress : callable, optional
         Called with a short text after each step.
+    min_support_sigma_ps : float
+        Fast backend: plan the impulse response for at least this Gaussian sigma, ps (references of sensors
+        with different jitter then run one compiled program; equal within float32 rounding). Ignored by the
+        twin, which has no plan.
 
     Returns
     -------
@@ -345,8 +350,9 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None)
         step = lambda done, total: progress(  # noqa: E731
             f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
     # the twin's "relay wall only" is said once in the report, not per scene: its warnings are not repeated here
+    sized = {"min_support_sigma_ps": float(min_support_sigma_ps)} if scenes.backend == "fast" else {}
     means = np.asarray(expected_batch(batch, sensor, backend=scenes.backend, fidelity=scenes.fidelity,
-                                      progress=step).expected, np.float32)
+                                      progress=step, **sized).expected, np.float32)
     sd = scenes.session_sd()
     if not scenes.crlb_objects:
         return ReferenceData(sensor, labels, means=means, source=scenes.backend,
@@ -409,7 +415,7 @@ def build_reference(job) -> dict:
     path = Path(job.path)
     seconds = 0.0
     if not path.exists():
-        ref = simulate_reference(job.sensor, job.scenes)
+        ref = simulate_reference(job.sensor, job.scenes, min_support_sigma_ps=job.min_support_sigma_ps)
         ref.save(path)
         seconds = ref.seconds
     return {"path": str(path), "status": "ok", "seconds": seconds, "scenes": job.scenes.n_scenes,

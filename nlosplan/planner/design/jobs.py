@@ -145,16 +145,20 @@ class ReferenceJob:
         Its scenes (with the world's ``scene_kwargs``).
     label : str
         E.g. ``"3x3"`` or ``"world 2, 1x1"`` (for progress and the report).
+    min_support_sigma_ps : float
+        The fast simulator plans the impulse response for at least this Gaussian sigma, ps (a run's worlds: the
+        largest of their sensors', so every world of a layout runs one compiled program); 0: the sensor's own.
     """
 
     path: str
     sensor: SensorConfig
     scenes: SceneSet
     label: str
+    min_support_sigma_ps: float = 0.0
 
     def to_dict(self) -> dict:
         return {"path": self.path, "sensor": self.sensor.to_dict(), "scenes": self.scenes.to_dict(),
-                "label": self.label}
+                "label": self.label, "min_support_sigma_ps": self.min_support_sigma_ps}
 
 
 @dataclass(frozen=True)

@@ -555,6 +555,10 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
         path = world_reference_path(out, w.index, layout, scenes, sensor)
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
+    # every world's plan sized for the largest world jitter: a layout's worlds run one compiled program (each
+    # world's own sigma would round to its own support: world references compiled the simulator once per step)
+    widest = max((j.sensor.impulse_sigma_ps for j in jobs), default=0.0)
+    jobs = [replace(j, min_support_sigma_ps=widest) for j in jobs]
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
     _simulate(executor, jobs, say, "world references", cache)
     return paths

@@ -49,9 +49,12 @@ class FastBackend:
                                plan=sim.plan, t0=t0, meta=dict(scene.meta))
 
     def expected_batch(self, scenes, sensor, *, fidelity="default", zones=None, dtype="float32", prune: bool = True,
-                       parts: bool = False, chunk: int | None = None, progress=None, pad_to=None) -> BatchResult:
+                       parts: bool = False, chunk: int | None = None, progress=None, pad_to=None,
+                       min_support_sigma_ps: float = 0.0) -> BatchResult:
         """One :class:`FastSimulator` of the whole list (its compiled batches, shared terms and threads)."""
-        kw = {"pad_to": pad_to} if chunk is None else {"chunk": chunk, "pad_to": pad_to}
+        kw = {"pad_to": pad_to, "min_support_sigma_ps": min_support_sigma_ps}
+        if chunk is not None:
+            kw["chunk"] = chunk
         sim = FastSimulator(list(scenes), sensor, fidelity=fidelity, zones=zones, dtype=dtype, prune=prune, **kw)
         out = sim.expected(parts=parts, progress=progress)
         if parts:

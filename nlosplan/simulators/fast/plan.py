@@ -348,7 +348,8 @@ def _pileup_reason(sensor: SensorConfig) -> str:
     return f"{sensor.spads_per_zone} detector(s) per zone, {dead}; ambient and dark counts count toward it"
 
 
-def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool = True) -> SimPlan:
+def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool = True,
+               min_support_sigma_ps: float = 0.0) -> SimPlan:
     """Plan the fast simulation of a batch of scenes and sensors.
 
     Parameters
@@ -362,11 +363,18 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         Only these zones (default all).
     prune : bool
         Leave out terms, zones, cells and samples that cannot contribute.
+    min_support_sigma_ps : float
+        Size the impulse response's support and the time grid for at least this Gaussian sigma (ps), as for
+        the sensors' own largest (both rounded up to :data:`SUPPORT_SIGMA_STEP_PS`): batches whose sensors differ
+        in jitter (a design run's worlds) then share one structure and one compiled program. It adds only the
+        Gaussian's mass beyond 9 sigma and empty grid bins.
 
     Returns
     -------
     SimPlan
     """
+    if not (math.isfinite(float(min_support_sigma_ps)) and float(min_support_sigma_ps) >= 0.0):
+        raise UserError(f"min_support_sigma_ps={min_support_sigma_ps!r} must be a finite number >= 0")
     scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
     sensors = [sensors] if isinstance(sensors, SensorConfig) else list(sensors)
     if not scenes or not sensors:
@@ -391,7 +399,8 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
 
     sigmas = [s.impulse_sigma_ps for s in sensors]
     sigma_max = max(sigmas)
-    support = support_sigma_ps(sigma_max)  # the support's sigma: sensors of nearby jitter share one plan structure
+    # the support's sigma: sensors of nearby jitter (and batches sized for one sigma) share one plan structure
+    support = support_sigma_ps(max(sigma_max, float(min_support_sigma_ps)))
     # arrival times that can reach the window through the impulse response and the time walk's largest shift
     reach = (min(s.start_offset_ps - irf_extent_ps(s, support)[1] - _moves(s) for s in sensors),
              max(s.start_offset_ps + s.window_ps - irf_extent_ps(s, support)[0] + _moves(s) for s in sensors))

@@ -190,6 +190,10 @@ class FastSimulator:
         to its sizes where smaller (:func:`~nlosplan.simulators.fast.plan.pad_plan`), so a sweep over objects
         or positions reuses one compiled program instead of compiling one per batch. Equal within float32
         rounding.
+    min_support_sigma_ps : float
+        Plan the impulse response's support for at least this Gaussian sigma, ps
+        (:func:`~nlosplan.simulators.fast.plan.build_plan`): batches of sensors with different jitter then share
+        one compiled program. Equal within float32 rounding.
 
     Examples
     --------
@@ -203,7 +207,7 @@ class FastSimulator:
     def __init__(self, scenes, sensor: SensorConfig | None = None, *, fidelity="default", zones=None,
                  prune: bool = True, dtype="float32", sensors=None, chunk: int = 25, deposit: str | None = None,
                  cache_chunks: bool = True, share: bool = True, threads: int | None = None,
-                 pad_to: SimPlan | None = None):
+                 pad_to: SimPlan | None = None, min_support_sigma_ps: float = 0.0):
         self.scenes = [scenes] if isinstance(scenes, Scene) else list(scenes)
         self.sensors = list(sensors) if sensors is not None else [sensor]
         if any(not isinstance(s, SensorConfig) for s in self.sensors):
@@ -217,7 +221,8 @@ class FastSimulator:
             deposit = default_deposit()
         if deposit not in DEPOSIT_METHODS:
             raise UserError(f"deposit={deposit!r} is not supported; allowed: {', '.join(DEPOSIT_METHODS)}")
-        self.plan: SimPlan = pad_plan(build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune), pad_to)
+        self.plan: SimPlan = pad_plan(build_plan(self.scenes, self.sensors, fidelity, zones=zones, prune=prune,
+                                                min_support_sigma_ps=min_support_sigma_ps), pad_to)
         if deposit != self.plan.static.deposit:
             self.plan = dataclasses.replace(self.plan, static=dataclasses.replace(self.plan.static, deposit=deposit))
         self.chunk = max(1, int(chunk))

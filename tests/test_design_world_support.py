@@ -1,0 +1,21 @@
+"""A design run's world references are planned for the largest world sigma: one compiled program per layout."""
+
+from nlosplan.planner.design import run as design_run
+from nlosplan.planner.design.config import full_config
+from nlosplan.simulators.fast.plan import support_sigma_ps
+
+
+def test_every_world_reference_is_planned_for_the_widest_world_jitter(tmp_path, monkeypatch):
+    cfg = full_config()
+    plan = design_run._world_plan(cfg)
+    seen = []
+    monkeypatch.setattr(design_run, "_simulate", lambda executor, jobs, say, what, cache: seen.extend(jobs))
+    need = [(w, layout) for w in plan.worlds for layout in ("1x1", "3x3")]
+    paths = design_run._world_references(cfg, tmp_path, plan, need, None, lambda *a: None)
+    assert len(seen) == len(need) == len(paths)
+    own = [j.sensor.impulse_sigma_ps for j in seen]
+    # the main job's worlds round to more than one support on their own (world 0 has no jitter at all) ...
+    assert len({support_sigma_ps(s) for s in own if s > 0}) > 1 and min(own) == 0.0
+    # ... and every job carries the widest, so their plans share one support
+    assert {j.min_support_sigma_ps for j in seen} == {max(own)}
+    assert all(j.to_dict()["min_support_sigma_ps"] == max(own) for j in seen)
