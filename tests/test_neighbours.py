@@ -119,3 +119,25 @@ def test_the_validation_scores_equal_scikit_learn_s_estimators_at_every_k():
         assert _val_score("loc", xy[order[:, :k]], xy_val) == pytest.approx(np.sqrt(np.mean((pred - xy_val) ** 2)))
         label = KNeighborsClassifier(k, algorithm="brute").fit(a, cls).predict(b)
         assert _val_score("shape", cls[order[:, :k]], cls_val) == pytest.approx(np.mean(label != cls_val))
+
+
+def test_scatter_components_equal_pca_and_two_parts_add_up_to_their_union():
+    # short captures take their components from one scatter matrix per part (the fit part's, then the union's
+    # by adding the validation part's): the same subspace as a PCA of the union, so the same distances
+    from nlosplan.tasks.neighbours import COVARIANCE_MAX_DIM, _Moments, _Projection
+
+    rng = np.random.default_rng(5)
+    latent = rng.normal(size=(400, 6)) * np.array([9.0, 7.0, 5.0, 4.0, 3.0, 2.0])
+    x = (latent @ rng.normal(size=(6, 96)) + 30.0 + rng.normal(scale=0.1, size=(400, 96))).astype(np.float32)
+    assert x.shape[1] <= COVARIANCE_MAX_DIM
+    shift = x[:300].mean(axis=0)
+    union = _Moments(x[:300], shift) + _Moments(x[300:], shift)
+    whole = _Moments(x, x.mean(axis=0))
+    assert union.n == 400 and np.allclose(union.shift + union.total / 400, x.mean(axis=0), atol=1e-4)
+    ours, exact = union.projection(6), _Projection.fit(x.astype(np.float64), 6, seed=0)
+    np.testing.assert_allclose(np.abs(ours.basis.T @ exact.basis), np.eye(6), atol=1e-3)   # same axes, up to sign
+    np.testing.assert_allclose(np.abs(whole.projection(6).basis.T @ exact.basis), np.eye(6), atol=1e-3)
+    a, b = ours(x), exact(x).astype(np.float32)
+    d_ours = np.linalg.norm(a[:, None] - a[None], axis=-1)
+    d_exact = np.linalg.norm(b[:, None] - b[None], axis=-1)
+    assert np.abs(d_ours - d_exact).max() <= 1e-3 * d_exact.max()

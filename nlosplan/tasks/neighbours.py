@@ -8,7 +8,9 @@ position (localization) or the vote share per class (shape, size) of its ``k`` n
 number of components (:data:`COMPONENT_CHOICES`) and ``k`` (:data:`K_CHOICES`) are chosen together on a seeded
 validation part of the training captures (15 %, stratified for classes, the share the networks hold out for early
 stopping), then the components are refitted on every training capture and every one is a neighbour.
-scikit-learn's PCA and brute-force neighbours do the work.
+The components are the exact eigenvectors of the captures' scatter matrix up to :data:`COVARIANCE_MAX_DIM` values
+a capture (one (D, D) product serves both fits), scikit-learn's randomized PCA for longer captures (8x8 zones);
+scikit-learn's brute-force neighbours do the search.
 
 Measured on the main job's DENALI reference (30 objects, 2,100 training captures, DENALI's design, seed 0): the
 projection takes localization from 6.2 to 4.4 cm, shape from 25 to 33-38 % and size from 91 to 96 %
@@ -36,6 +38,10 @@ __all__ = ["COMPONENT_CHOICES", "K_CHOICES", "NeighbourModel", "fit_neighbours",
 K_CHOICES = (1, 3, 5, 9, 15)
 #: Principal components the validation part chooses among (those above the fit part's rank are skipped).
 COMPONENT_CHOICES = (4, 8, 12, 16, 24, 32)
+#: Longest capture (zones x bins) whose principal components are the exact eigenvectors of its scatter matrix
+#: (one (D, D) product: cheaper than scikit-learn's randomized PCA, fitted twice, up to about this length; 3x3 x 128
+#: is 1,152); longer captures use the randomized PCA.
+COVARIANCE_MAX_DIM = 1536
 #: Components and neighbours when too few captures leave no validation part.
 DEFAULT_COMPONENTS, DEFAULT_K = 16, 5
 
@@ -113,18 +119,59 @@ def _val_score(task: str, near: np.ndarray, y: np.ndarray) -> float:
 
 
 class _Projection:
-    """Centring and projection on the leading principal components: (N, D) -> (N, components) float32."""
+    """Centring and projection on the leading principal components: (N, D) -> (N, components) float32.
 
-    def __init__(self, x: np.ndarray, components: int, seed: int):
+    ``mean`` (D,) and ``basis`` (D, components), leading component first.
+    """
+
+    def __init__(self, mean: np.ndarray, basis: np.ndarray):
+        self.mean = np.asarray(mean, np.float32)
+        self.basis = np.asarray(basis, np.float32)
+
+    @classmethod
+    def fit(cls, x: np.ndarray, components: int, seed: int) -> "_Projection":
+        """scikit-learn's PCA of ``x`` (N, D) (randomized for long captures)."""
         from sklearn.decomposition import PCA
 
         pca = PCA(n_components=components, random_state=int(seed) % 2**32).fit(x)
-        self.mean = pca.mean_.astype(np.float32)
-        self.basis = pca.components_.T.astype(np.float32)   # (D, components)
+        return cls(pca.mean_, pca.components_.T)
+
+    @classmethod
+    def of_scatter(cls, mean: np.ndarray, scatter: np.ndarray, components: int) -> "_Projection":
+        """The leading eigenvectors of a scatter matrix (D, D) about ``mean`` (D,): an exact PCA."""
+        from scipy.linalg import eigh
+
+        d = len(scatter)
+        _, vectors = eigh(scatter, subset_by_index=[d - components, d - 1])
+        return cls(mean, vectors[:, ::-1])
 
     def __call__(self, x: np.ndarray, components: int | None = None) -> np.ndarray:
         basis = self.basis if components is None else self.basis[:, :components]
         return (x - self.mean) @ basis
+
+
+class _Moments:
+    """Sums of a set of captures about a shift, float64: ``n``, ``total`` (D,) and ``scatter`` (D, D).
+
+    Two sets' moments add up to their union's, so the fit part's and all captures' principal components come
+    from one (D, D) product over each capture (:data:`COVARIANCE_MAX_DIM`).
+    """
+
+    def __init__(self, x: np.ndarray, shift: np.ndarray):
+        xc = x - shift
+        self.n, self.shift = len(x), shift.astype(np.float64)
+        self.total = xc.sum(axis=0, dtype=np.float64)
+        self.scatter = (xc.T @ xc).astype(np.float64)   # float32 product of centred values
+
+    def __add__(self, other: "_Moments") -> "_Moments":
+        out = object.__new__(_Moments)
+        out.n, out.shift = self.n + other.n, self.shift
+        out.total, out.scatter = self.total + other.total, self.scatter + other.scatter
+        return out
+
+    def projection(self, components: int) -> _Projection:
+        d = self.total / self.n   # the mean's offset from the shift
+        return _Projection.of_scatter(self.shift + d, self.scatter - self.n * np.outer(d, d), components)
 
 
 def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 42,
@@ -165,6 +212,7 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
         strat = y if counts.min() >= 2 else None
     n_val = int(round(val_fraction * n))
     history = []
+    moments_ok, moments = x.shape[1] <= COVARIANCE_MAX_DIM, None
     c_best, k_best = min(DEFAULT_COMPONENTS, n - 1, x.shape[1]), min(DEFAULT_K, n)
     if n_val >= 1 and n - n_val >= 2:
         try:
@@ -173,7 +221,12 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
             fit, val = train_test_split(np.arange(n), test_size=n_val, random_state=int(seed) % 2**32)
         rank = min(len(fit) - 1, x.shape[1])
         choices = [c for c in COMPONENT_CHOICES if c <= rank] or [rank]
-        proj = _Projection(x[fit], max(choices), seed)
+        if moments_ok:
+            shift = x[fit].mean(axis=0)
+            moments = (_Moments(x[fit], shift), _Moments(x[val], shift))
+            proj = moments[0].projection(max(choices))
+        else:
+            proj = _Projection.fit(x[fit], max(choices), seed)
         ks = [k for k in K_CHOICES if k <= len(fit)]
         for c in choices:   # one neighbour search per component count; every k reads its first k neighbours
             order = _nearest(proj(x[fit], c), proj(x[val], c), max(ks))
@@ -183,7 +236,12 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
         c_best, k_best = best["components"], best["k"]
     else:
         n_val = 0
-    project = _Projection(x, c_best, seed)
+    if moments is not None:
+        project = (moments[0] + moments[1]).projection(c_best)
+    elif moments_ok:
+        project = _Moments(x, x.mean(axis=0)).projection(c_best)
+    else:
+        project = _Projection.fit(x, c_best, seed)
     est = _estimator(task, k_best).fit(project(x), y)
     if names is not None and len(est.classes_) < len(names):
         est = _padded(est, len(names))

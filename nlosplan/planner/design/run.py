@@ -555,10 +555,12 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
         path = world_reference_path(out, w.index, layout, scenes, sensor)
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
-    # every world's plan sized for the largest world jitter: a layout's worlds run one compiled program (each
-    # world's own sigma would round to its own support: world references compiled the simulator once per step)
+    # every world with a Gaussian in its impulse response planned for the largest world's: a layout's worlds run
+    # one compiled program (each world's own sigma would round to its own support: world references compiled the
+    # simulator once per 50 ps step); one without (world 0, the nominal model) keeps the nominal reference's plan,
+    # whose program the nominal references stage left in the compilation cache
     widest = max((j.sensor.impulse_sigma_ps for j in jobs), default=0.0)
-    jobs = [replace(j, min_support_sigma_ps=widest) for j in jobs]
+    jobs = [replace(j, min_support_sigma_ps=widest) if j.sensor.impulse_sigma_ps > 0 else j for j in jobs]
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
     _simulate(executor, jobs, say, "world references", cache)
     return paths
