@@ -164,6 +164,8 @@ class _Moments:
         self.scatter = (xc.T @ xc).astype(np.float64)   # float32 product of centred values
 
     def __add__(self, other: "_Moments") -> "_Moments":
+        if not np.array_equal(self.shift, other.shift):
+            raise ValueError("moments about different shifts do not add up")
         out = object.__new__(_Moments)
         out.n, out.shift = self.n + other.n, self.shift
         out.total, out.scatter = self.total + other.total, self.scatter + other.scatter
