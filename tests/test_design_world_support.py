@@ -21,3 +21,17 @@ def test_every_world_reference_is_planned_for_the_widest_world_jitter(tmp_path, 
     assert {j.min_support_sigma_ps for j in seen if j.sensor.impulse_sigma_ps > 0} == {max(own)}
     assert {j.min_support_sigma_ps for j in seen if j.sensor.impulse_sigma_ps == 0} == {0.0}
     assert all(j.to_dict()["min_support_sigma_ps"] == max(own) for j in seen if j.sensor.impulse_sigma_ps > 0)
+
+
+def test_the_twins_world_references_are_not_sized(tmp_path, monkeypatch):
+    # the Mitsuba twin has no plan: its jobs carry 0, which expected_batch accepts for any backend
+    from dataclasses import replace
+
+    cfg = full_config()
+    plan = design_run._world_plan(cfg)
+    plan = replace(plan, scenes=replace(plan.scenes, backend="mitsuba"))
+    seen = []
+    monkeypatch.setattr(design_run, "_simulate", lambda executor, jobs, say, what, cache: seen.extend(jobs))
+    design_run._world_references(cfg, tmp_path, plan, [(w, "1x1") for w in plan.worlds], None, lambda *a: None)
+    assert len(seen) == len(plan.worlds) and {j.min_support_sigma_ps for j in seen} == {0.0}
+    assert max(j.sensor.impulse_sigma_ps for j in seen) > 0

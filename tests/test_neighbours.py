@@ -131,8 +131,8 @@ def test_scatter_components_equal_pca_and_two_parts_add_up_to_their_union():
     x = (latent @ rng.normal(size=(6, 96)) + 30.0 + rng.normal(scale=0.1, size=(400, 96))).astype(np.float32)
     assert x.shape[1] <= COVARIANCE_MAX_DIM
     shift = x[:300].mean(axis=0)
-    union = _Moments(x[:300], shift) + _Moments(x[300:], shift)
-    whole = _Moments(x, x.mean(axis=0))
+    union = _Moments.of(x[:300], shift) + _Moments.of(x[300:], shift)
+    whole = _Moments.of(x, x.mean(axis=0))
     assert union.n == 400 and np.allclose(union.shift + union.total / 400, x.mean(axis=0), atol=1e-4)
     ours, exact = union.projection(6), _Projection.fit(x.astype(np.float64), 6, seed=0)
     np.testing.assert_allclose(np.abs(ours.basis.T @ exact.basis), np.eye(6), atol=1e-3)   # same axes, up to sign
@@ -141,3 +141,5 @@ def test_scatter_components_equal_pca_and_two_parts_add_up_to_their_union():
     d_ours = np.linalg.norm(a[:, None] - a[None], axis=-1)
     d_exact = np.linalg.norm(b[:, None] - b[None], axis=-1)
     assert np.abs(d_ours - d_exact).max() <= 1e-3 * d_exact.max()
+    with pytest.raises(ValueError, match="moments about different shifts do not add up"):
+        _Moments.of(x[:300], shift) + _Moments.of(x[300:], shift + 1.0)

@@ -150,26 +150,30 @@ class _Projection:
         return (x - self.mean) @ basis
 
 
+@dataclass(frozen=True, eq=False)
 class _Moments:
-    """Sums of a set of captures about a shift, float64: ``n``, ``total`` (D,) and ``scatter`` (D, D).
+    """Sums of a set of captures about a shift, float64: ``n``, ``shift`` (D,), ``total`` (D,), ``scatter`` (D, D).
 
     Two sets' moments add up to their union's, so the fit part's and all captures' principal components come
     from one (D, D) product over each capture (:data:`COVARIANCE_MAX_DIM`).
     """
 
-    def __init__(self, x: np.ndarray, shift: np.ndarray):
+    n: int
+    shift: np.ndarray
+    total: np.ndarray
+    scatter: np.ndarray
+
+    @classmethod
+    def of(cls, x: np.ndarray, shift: np.ndarray) -> "_Moments":
+        """The moments of captures ``x`` (N, D) about ``shift`` (D,)."""
         xc = x - shift
-        self.n, self.shift = len(x), shift.astype(np.float64)
-        self.total = xc.sum(axis=0, dtype=np.float64)
-        self.scatter = (xc.T @ xc).astype(np.float64)   # float32 product of centred values
+        return cls(len(x), shift.astype(np.float64), xc.sum(axis=0, dtype=np.float64),
+                   (xc.T @ xc).astype(np.float64))   # a float32 product of centred values
 
     def __add__(self, other: "_Moments") -> "_Moments":
         if not np.array_equal(self.shift, other.shift):
             raise ValueError("moments about different shifts do not add up")
-        out = object.__new__(_Moments)
-        out.n, out.shift = self.n + other.n, self.shift
-        out.total, out.scatter = self.total + other.total, self.scatter + other.scatter
-        return out
+        return _Moments(self.n + other.n, self.shift, self.total + other.total, self.scatter + other.scatter)
 
     def projection(self, components: int) -> _Projection:
         d = self.total / self.n   # the mean's offset from the shift
@@ -225,7 +229,7 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
         choices = [c for c in COMPONENT_CHOICES if c <= rank] or [rank]
         if moments_ok:
             shift = x[fit].mean(axis=0)
-            moments = (_Moments(x[fit], shift), _Moments(x[val], shift))
+            moments = (_Moments.of(x[fit], shift), _Moments.of(x[val], shift))
             proj = moments[0].projection(max(choices))
         else:
             proj = _Projection.fit(x[fit], max(choices), seed)
@@ -241,7 +245,7 @@ def fit_neighbours(histograms, targets, *, task: str, classes=None, seed: int = 
     if moments is not None:
         project = (moments[0] + moments[1]).projection(c_best)
     elif moments_ok:
-        project = _Moments(x, x.mean(axis=0)).projection(c_best)
+        project = _Moments.of(x, x.mean(axis=0)).projection(c_best)
     else:
         project = _Projection.fit(x, c_best, seed)
     est = _estimator(task, k_best).fit(project(x), y)

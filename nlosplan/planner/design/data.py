@@ -326,8 +326,8 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
         Called with a short text after each step.
     min_support_sigma_ps : float
         Fast backend: plan the impulse response for at least this Gaussian sigma, ps (references of sensors
-        with different jitter then run one compiled program; equal within float32 rounding). Ignored by the
-        twin, which has no plan.
+        with different jitter then run one compiled program; equal within float32 rounding); 0 for the twin,
+        which has no plan (:func:`~nlosplan.simulators.expected_batch` refuses anything else).
 
     Returns
     -------
@@ -350,9 +350,8 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
         step = lambda done, total: progress(  # noqa: E731
             f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
     # the twin's "relay wall only" is said once in the report, not per scene: its warnings are not repeated here
-    sized = {"min_support_sigma_ps": float(min_support_sigma_ps)} if scenes.backend == "fast" else {}
     means = np.asarray(expected_batch(batch, sensor, backend=scenes.backend, fidelity=scenes.fidelity,
-                                      progress=step, **sized).expected, np.float32)
+                                      progress=step, min_support_sigma_ps=min_support_sigma_ps).expected, np.float32)
     sd = scenes.session_sd()
     if not scenes.crlb_objects:
         return ReferenceData(sensor, labels, means=means, source=scenes.backend,

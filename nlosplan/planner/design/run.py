@@ -558,8 +558,8 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
     # every world with a Gaussian in its impulse response planned for the largest world's: a layout's worlds run
     # one compiled program (each world's own sigma would round to its own support: world references compiled the
     # simulator once per 50 ps step); one without (world 0, the nominal model) keeps the nominal reference's plan,
-    # whose program the nominal references stage left in the compilation cache
-    widest = max((j.sensor.impulse_sigma_ps for j in jobs), default=0.0)
+    # whose program the nominal references stage left in the compilation cache; the twin has no plan to size
+    widest = max((j.sensor.impulse_sigma_ps for j in jobs), default=0.0) if plan.scenes.backend == "fast" else 0.0
     jobs = [replace(j, min_support_sigma_ps=widest) if j.sensor.impulse_sigma_ps > 0 else j for j in jobs]
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
     _simulate(executor, jobs, say, "world references", cache)
