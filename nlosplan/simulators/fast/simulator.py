@@ -136,6 +136,17 @@ def to_jax(tree, dtype):
     return jax.tree_util.tree_map(conv, tree)
 
 
+def _map_threads(fn, items: list, threads: int):
+    """``fn`` over ``items`` in order, on up to ``threads`` threads (a generator; one thread: in this one)."""
+    threads = min(int(threads), len(items))
+    if threads > 1:
+        with ThreadPoolExecutor(threads, thread_name_prefix="nlosplan-sim") as pool:
+            yield from pool.map(fn, items)
+    else:
+        for item in items:
+            yield fn(item)
+
+
 class FastSimulator:
     """The fast (JAX) backend for a batch of scenes and sensors.
 
@@ -381,12 +392,17 @@ class FastSimulator:
                 scene_np = self._scene_arrays()
                 tables = []
                 for only, first, group in classes:
-                    outs = []
-                    for start in range(0, len(first), self.chunk):  # chunks of the scenes' shape: one compile each way
+                    def one(start, only=only, first=first):
                         idx = first[np.arange(start, start + self.chunk).clip(max=len(first) - 1)]
                         chunk_p = to_jax(jax.tree_util.tree_map(lambda a: np.asarray(a)[idx], scene_np), self.dtype)
                         keep = min(self.chunk, len(first) - start)
-                        outs.append(np.asarray(_SHARED(self.plan.static, self._arrays, chunk_p, terms, only))[:, :keep])
+                        return np.asarray(_SHARED(self.plan.static, self._arrays, chunk_p, terms, only))[:, :keep]
+
+                    # chunks of the scenes' shape (one compile each way); the first alone (it compiles), the others
+                    # on the simulator's threads, as in _run
+                    starts = list(range(0, len(first), self.chunk))
+                    outs = [one(starts.pop(0))]
+                    outs += _map_threads(one, starts, self.threads)
                     tables.append((group, np.concatenate(outs, axis=1)))
                 self._shared = (tuple(sorted(k for c in classes for k in c[0])), tables)
         return self._shared or None
@@ -424,14 +440,8 @@ class FastSimulator:
         if parts not in self._warm:  # alone: the first call compiles (once per plan structure and process)
             done(one(jobs.pop(0)))
             self._warm.add(parts)
-        threads = min(self.threads, len(jobs))
-        if threads > 1:
-            with ThreadPoolExecutor(threads, thread_name_prefix="nlosplan-sim") as pool:
-                for out in pool.map(one, jobs):  # in order
-                    done(out)
-        else:
-            for job in jobs:
-                done(one(job))
+        for out in _map_threads(one, jobs, self.threads):
+            done(out)
         return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs, axis=1), *outs)
 
     def _terms(self) -> dict:
