@@ -73,3 +73,43 @@ def test_normals_never_average_front_and_side():
     # each point's normal equals the normal of the face it sits on, within the 20 deg grouping
     cos = np.einsum("ij,ij->i", q.normals, mesh.face_normals[q.face_index])
     assert cos.min() > np.cos(np.radians(25))
+
+
+def test_quadratures_are_kept_on_disk_for_the_next_process(tmp_path, monkeypatch):
+    """A quadrature is written to $NLOSPLAN_CACHE/quadrature once and read back equal; a torn file is computed again."""
+    from nlosplan.simulators import meshes
+
+    monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
+    monkeypatch.setattr(meshes, "_QUADRATURES", {})
+    mesh = object_mesh("S", "4in")
+    first = surface_quadrature(mesh, 97)
+    files = sorted((tmp_path / "quadrature").glob("*.npz"))
+    assert len(files) == 1 and not list((tmp_path / "quadrature").glob(".*"))  # no temporary file left
+    calls = []
+    monkeypatch.setattr(meshes, "_quadrature", lambda *a: calls.append(a) or pytest.fail("computed again"))
+    monkeypatch.setattr(meshes, "_QUADRATURES", {})  # a new process: only the disk has it
+    again = surface_quadrature(mesh, 97)
+    for name in ("points", "normals", "areas", "face_index"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(first, name))
+        assert not getattr(again, name).flags.writeable
+    monkeypatch.undo()
+    monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
+    monkeypatch.setattr(meshes, "_QUADRATURES", {})
+    surface_quadrature(mesh, 98)  # another point count: another file
+    assert len(list((tmp_path / "quadrature").glob("*.npz"))) == 2
+    files[0].write_bytes(files[0].read_bytes()[:100])  # torn by a crash
+    monkeypatch.setattr(meshes, "_QUADRATURES", {})
+    redone = surface_quadrature(mesh, 97)
+    np.testing.assert_array_equal(redone.points, first.points)
+    assert meshes._load_quadrature(files[0]) is not None  # written whole again
+
+
+def test_an_unwritable_quadrature_cache_costs_time_not_the_result(tmp_path, monkeypatch):
+    from nlosplan.simulators import meshes
+
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("NLOSPLAN_CACHE", str(blocker))  # $NLOSPLAN_CACHE/quadrature cannot be made
+    monkeypatch.setattr(meshes, "_QUADRATURES", {})
+    q = surface_quadrature(object_mesh("A", "4in"), 50)
+    assert q.areas.sum() == pytest.approx(object_mesh("A", "4in").area, rel=1e-12)

@@ -19,7 +19,11 @@ that of independent sampling for smooth ``f``.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import os
+import tempfile
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -343,8 +347,62 @@ def surface_quadrature(mesh: Mesh, n: int, *, face_mask: np.ndarray | None = Non
     if key not in _QUADRATURES:  # deterministic: every plan of a mesh (layouts, worlds, batches) reuses it
         if len(_QUADRATURES) >= _QUADRATURE_CACHE_SIZE:
             _QUADRATURES.pop(next(iter(_QUADRATURES)))
-        _QUADRATURES[key] = _quadrature(mesh, n, sel, oversample, iterations, max_cells)
+        path = _quadrature_file(key)
+        got = _load_quadrature(path)
+        if got is None:
+            got = _quadrature(mesh, n, sel, oversample, iterations, max_cells)
+            _save_quadrature(path, got)
+        _QUADRATURES[key] = got
     return _QUADRATURES[key]
+
+
+#: Version of :func:`_quadrature`'s construction: part of the disk cache's key, raised when the points change.
+QUADRATURE_VERSION = 1
+
+
+def _quadrature_file(key: tuple) -> Path:
+    """``$NLOSPLAN_CACHE/quadrature/DIGEST.npz``: a quadrature by its mesh's content, faces, point count and knobs."""
+    from nlosplan.resources import cache_root
+
+    digest = hashlib.sha1(repr((QUADRATURE_VERSION,) + key).encode()).hexdigest()
+    return cache_root() / "quadrature" / f"{digest}.npz"
+
+
+def _load_quadrature(path: Path) -> SurfaceSamples | None:
+    """A cached quadrature, or None when there is none or it cannot be read (it is then computed again)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            out = [np.array(z[k]) for k in ("points", "normals", "areas", "face_index")]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    if not (out[0].ndim == 2 and out[0].shape[1:] == (3,) and out[1].shape == out[0].shape
+            and out[2].shape == out[3].shape == out[0].shape[:1]):
+        return None
+    for a in out:
+        a.setflags(write=False)
+    return SurfaceSamples(points=out[0], normals=out[1], areas=out[2], face_index=out[3])
+
+
+def _save_quadrature(path: Path, q: SurfaceSamples) -> None:
+    """Write a quadrature for the next process (design workers, later runs): renamed into place whole.
+
+    A cache: a folder that cannot be written only costs the next process the same 0.01-0.3 s per mesh
+    again, so a failed write is dropped (the result in hand is right either way). No fsync: a torn file after a crash
+    fails :func:`_load_quadrature`'s checks and is computed again.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.npz", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, points=q.points, normals=q.normals, areas=q.areas, face_index=q.face_index)
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+    except OSError:
+        pass
 
 
 #: Surface quadratures computed in this process, by mesh content, point count, faces and knobs (oldest dropped).
