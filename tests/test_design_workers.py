@@ -1,5 +1,7 @@
 """Design worker processes: one thread each for numpy's BLAS and torch (the pool is the parallelism)."""
 
+import os
+
 import pytest
 from threadpoolctl import threadpool_info
 
@@ -65,7 +67,10 @@ def test_recycled_workers_are_fresh_processes():
     pool = PoolExecutor(2)
     try:
         before = {res for _, res in pool.map(_pid, [_Probe()] * 6)}
-        pool.recycle()
+        assert pool.recycle(10**12) is False  # none holds a terabyte: kept
+        kept = {res for _, res in pool.map(_pid, [_Probe()] * 6)}
+        assert kept <= before
+        assert pool.recycle(1) is True  # every worker holds more than a byte: replaced
         after = {res for _, res in pool.map(_pid, [_Probe()] * 6)}
         assert after and before.isdisjoint(after)
         assert {res["torch"] for _, res in pool.map(_threads, [_Probe()])} == {1}  # still set up as workers
@@ -85,8 +90,10 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     class Recorded(SerialExecutor):
         recycled = 0
 
-        def recycle(self):
+        def recycle(self, above_bytes=0):
+            assert above_bytes == run.RECYCLE_ABOVE_BYTES
             self.recycled += 1
+            return True
 
     cleared, held = [], []
     monkeypatch.setattr(jax, "clear_caches", lambda: cleared.append(1))
@@ -196,3 +203,15 @@ def test_workers_import_torch_only_when_a_job_does_and_then_with_one_thread(monk
     monkeypatch.setenv("OMP_NUM_THREADS", "4")
     res = _in_one_worker(_torch_state)
     assert res == {"imported_at_start": False, "torch": 1}
+
+
+def test_resident_memory_of_a_process_is_read_from_proc():
+    import numpy as np
+
+    from nlosplan.planner.design.executors import _resident_bytes
+
+    before = _resident_bytes(os.getpid())
+    block = np.ones(50_000_000, np.uint8)  # 50 MB touched
+    assert before is not None and _resident_bytes(os.getpid()) >= before + 40_000_000
+    del block
+    assert _resident_bytes(2**22 + 12345) is None  # no such process

@@ -46,6 +46,15 @@ def _failed(job, exc: BaseException) -> dict:
     return {**job.to_dict(), "status": "failed", "reason": f"{type(exc).__name__}: {exc}"}
 
 
+def _resident_bytes(pid: int) -> int | None:
+    """Resident memory of a process, bytes (``/proc/PID/statm``), or None where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 class SerialExecutor:
     """Run jobs one after another in this process."""
 
@@ -60,9 +69,10 @@ class SerialExecutor:
             except Exception as exc:  # noqa: BLE001 -- recorded, not fatal
                 yield job, _failed(job, exc)
 
-    def recycle(self) -> None:
-        """Drop the compiled programs this process holds (the jobs ran here)."""
+    def recycle(self, above_bytes: int = 0) -> bool:
+        """Drop the compiled programs this process holds (the jobs ran here); True."""
         release_programs()
+        return True
 
     def close(self) -> None:
         """Nothing to release: jobs ran in this process."""
@@ -95,12 +105,22 @@ class PoolExecutor:
                 yield job, (_failed(job, exc) if exc else f.result())
             _offer(source, ahead, lambda: len(pending), start)
 
-    def recycle(self) -> None:
-        """Replace the workers by fresh ones (after the simulation stages: what a worker compiled and cached for
-        a reference -- 2.5-2.9 GB for the 8x8 one or the stability catalog -- is not carried into the evaluations)."""
+    def recycle(self, above_bytes: int = 0) -> bool:
+        """Replace the workers by fresh ones when one of them holds more than ``above_bytes`` of memory.
+
+        After the simulation stages: what a worker compiled and cached for a reference -- 2.5-2.9 GB for the 8x8
+        one or the stability catalog -- is not carried into the evaluations. A fresh worker imports JAX, torch,
+        scikit-learn and the simulators again (2-4 s of a core each), so workers that stayed small (a round of
+        1x1 and 3x3 world references: 0.6-1.3 GB) are kept. Returns whether they were replaced; where a
+        worker's memory cannot be read they are.
+        """
+        sizes = [_resident_bytes(pid) for pid in list(self._pool._processes or {})]
+        if above_bytes > 0 and sizes and all(b is not None and b <= above_bytes for b in sizes):
+            return False
         self._pool.shutdown(wait=True)
         self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
                                          initializer=init_worker, initargs=(os.getpid(),))
+        return True
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
@@ -161,9 +181,10 @@ class DaskExecutor:
                 yield job, _failed(job, exc)
             _offer(source, ahead, queue.count, start)
 
-    def recycle(self) -> None:
-        """Every worker drops the compiled programs it holds."""
+    def recycle(self, above_bytes: int = 0) -> bool:
+        """Every worker drops the compiled programs it holds; True."""
         self._client.run(release_programs)
+        return True
 
     def close(self) -> None:
         self._client.close()

@@ -294,10 +294,15 @@ def _prepare(job) -> dict:
     return run_catalog(job) if isinstance(job, CatalogJob) else build_reference(job)
 
 
+#: After a simulation stage, a local pool's workers are replaced when one holds more than this (bytes of resident
+#: memory): the 8x8 reference or the catalog leave 2.5-2.9 GB, a round of small world references 0.6-1.3 GB.
+RECYCLE_ABOVE_BYTES = 1_500_000_000
+
+
 def _recycle(executor) -> None:
-    """After a simulation stage: fresh workers for the evaluations, or the programs dropped where there are none
-    (:meth:`PoolExecutor.recycle` and the others')."""
-    executor.recycle()
+    """After a simulation stage: fresh workers for the evaluations where one grew large, or the programs dropped
+    where there are no workers (:meth:`PoolExecutor.recycle` and the others')."""
+    executor.recycle(RECYCLE_ABOVE_BYTES)
 
 
 def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = True,
@@ -309,8 +314,9 @@ def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = 
     executors start jobs in order, so the longest does not run alone at the end). With ``catalog``, the
     stability catalog runs as one more job, after the largest reference, when any reference is simulated;
     its summary is returned (None when it did not run: the caller runs it). When anything ran, a local pool's
-    workers are replaced by fresh ones (:meth:`PoolExecutor.recycle`): the evaluations do not carry the
-    memory of the simulations (the cold main job peaked at 4.6 GB without it).
+    workers are replaced by fresh ones if one grew past :data:`RECYCLE_ABOVE_BYTES`
+    (:meth:`PoolExecutor.recycle`): the evaluations do not carry the memory of the large simulations (the cold
+    main job peaked at 4.6 GB without it), and do not import everything again after small ones.
     """
     if cache:
         jobs = [j for j in jobs if Path(j.path).exists() or not reference_cache.restore(j.path, j.sensor, j.scenes, say)]
