@@ -1,5 +1,7 @@
 """A design run's world references are planned for the largest world sigma: one compiled program per layout."""
 
+import pytest
+
 from nlosplan.planner.design import run as design_run
 from nlosplan.planner.design.config import full_config
 from nlosplan.simulators.fast.plan import support_sigma_ps
@@ -16,11 +18,34 @@ def test_every_world_reference_is_planned_for_the_widest_world_jitter(tmp_path, 
     own = [j.sensor.impulse_sigma_ps for j in seen]
     # the main job's worlds round to more than one support on their own (world 0 has no jitter at all) ...
     assert len({support_sigma_ps(s) for s in own if s > 0}) > 1 and min(own) == 0.0
-    # ... and every job with a Gaussian carries the widest, so their plans share one support; world 0 keeps the
-    # nominal reference's plan (its program is in the compilation cache from the nominal references)
-    assert {j.min_support_sigma_ps for j in seen if j.sensor.impulse_sigma_ps > 0} == {max(own)}
-    assert {j.min_support_sigma_ps for j in seen if j.sensor.impulse_sigma_ps == 0} == {0.0}
-    assert all(j.to_dict()["min_support_sigma_ps"] == max(own) for j in seen if j.sensor.impulse_sigma_ps > 0)
+    # ... and every job carries the widest, world 0 included, so their plans share one support
+    assert {j.min_support_sigma_ps for j in seen} == {max(own)} == {design_run._support_sigma(cfg, plan, "fast")}
+    assert all(j.to_dict()["min_support_sigma_ps"] == max(own) for j in seen)
+
+
+def test_the_nominal_references_are_planned_as_the_worlds_are(tmp_path, monkeypatch):
+    # so each layout's worlds run the program the references stage compiled; no worlds (a run on real captures):
+    # the sensor's own plan
+    cfg = full_config()
+    plan = design_run._world_plan(cfg)
+    seen = []
+    monkeypatch.setattr(design_run, "_simulate",
+                        lambda executor, jobs, say, what, cache, catalog=False: seen.extend(jobs) or ({}, None))
+
+    class NotSimulated(Exception):
+        pass
+
+    def load(path):
+        raise NotSimulated(path)
+
+    monkeypatch.setattr("nlosplan.planner.design.data.load_reference", load)  # what follows the jobs: not here
+    for worlds, want in ((plan, design_run._support_sigma(cfg, plan, "fast")), (None, 0.0)):
+        seen.clear()
+        with pytest.raises(NotSimulated):
+            design_run._references(cfg, tmp_path, lambda *a: None, None, worlds=worlds)
+        assert len(seen) == len(cfg.space.zones) and {j.min_support_sigma_ps for j in seen} == {want}
+    assert design_run._support_sigma(cfg, plan, "fast") > 50.0
+    assert design_run._support_sigma(cfg, plan, "mitsuba") == 0.0
 
 
 def test_the_twins_world_references_are_not_sized(tmp_path, monkeypatch):

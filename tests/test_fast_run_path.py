@@ -83,6 +83,15 @@ def test_a_plan_sized_for_a_wider_sigma_shares_its_structure_and_keeps_its_resul
     own = FastSimulator(scenes, narrow, fidelity="draft", dtype="float64").expected()
     got = expected_batch(scenes, narrow, fidelity="draft", dtype="float64", min_support_sigma_ps=sigma).expected[0]
     assert np.abs(own - got).max() <= 1e-9 * np.abs(own).max() and own.max() > 0
+    # a sensor without any Gaussian (a design run's nominal references) planned the same way: the Gaussian path
+    # with sigma 0 instead of the pulse-only one, the same structure as its worlds', the same histograms
+    sharp = base.replace(jitter_fwhm_ps=0.0, pulse_fwhm_ps=0.0)
+    assert sharp.impulse_sigma_ps == 0.0 and build_plan(scenes, sharp, "draft").static.irf in ("pulse", "none")
+    planned = FastSimulator(scenes, sharp, fidelity="draft", dtype="float64", min_support_sigma_ps=sigma)
+    assert planned.plan.static == sized.plan.static and planned.plan.static.irf == "full"
+    assert "planned for" in planned.explain()
+    own = FastSimulator(scenes, sharp, fidelity="draft", dtype="float64").expected()
+    assert np.abs(own - planned.expected()).max() <= 1e-9 * np.abs(own).max() and own.max() > 0
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(UserError, match="min_support_sigma_ps=.* must be a finite number >= 0"):
             build_plan(scenes, narrow, "draft", min_support_sigma_ps=bad)

@@ -345,18 +345,20 @@ def _simulate(executor, jobs: list[ReferenceJob], say, what: str, cache: bool = 
 
 
 def _references(cfg: DesignConfig, out: Path, say, executor, cache: bool = True,
-                catalog: bool = False) -> tuple[dict, dict, dict, dict | None]:
+                catalog: bool = False, worlds: robust.WorldPlan | None = None) -> tuple[dict, dict, dict, dict | None]:
     """Simulated reference per zone layout (reused when saved with the same key); real ones if asked.
 
     With ``catalog``, the stability catalog runs beside the references it simulates; its summary is the last
-    item (None when it did not run).
+    item (None when it did not run). With ``worlds``, the fast simulator plans them for the worlds' largest
+    jitter (:func:`_support_sigma`), so the worlds' references later run the programs compiled here.
     """
     from nlosplan.planner.design.data import load_reference
 
     real, info = {}, {}
     space, scenes = cfg.space, cfg.scenes
     sims = reference_paths(out, space, scenes)
-    jobs = [ReferenceJob(str(path), space.layout_sensor(parse_zones(layout)), scenes, layout)
+    support = _support_sigma(cfg, worlds, scenes.backend)
+    jobs = [ReferenceJob(str(path), space.layout_sensor(parse_zones(layout)), scenes, layout, support)
             for layout, path in sims.items() if not path.exists()]
     stability = None
     if jobs:
@@ -480,7 +482,7 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
     """References, then the ask/tell loop on ``executor`` until the search has nothing left; the summary."""
     quick = cfg.label.startswith("quick")
     stability = kept_summary(quick, cache)  # None: the catalog runs beside the references, or at the end
-    sims, real, ref_info, ran = _references(cfg, out, say, executor, cache, catalog=stability is None)
+    sims, real, ref_info, ran = _references(cfg, out, say, executor, cache, catalog=stability is None, worlds=worlds)
     stability = stability or ran
     if worlds is not None and cfg.worlds.scene_step == 1:  # the worlds' scenes are the run's: world 0 is its own
         worlds.references.update({(0, layout): str(path) for layout, path in sims.items()})
@@ -534,6 +536,20 @@ def _budget(cfg: DesignConfig, evidence, ref_info: dict) -> dict:
                             epochs=int(fid["epochs"]), repeats=int(fid["repeats"]), real=bool(cfg.real))
 
 
+def _support_sigma(cfg: DesignConfig, worlds: robust.WorldPlan | None, backend: str) -> float:
+    """The Gaussian sigma (ps) every simulated reference of the run is planned for: its worlds' largest.
+
+    The nominal references and every world's then share one plan structure, so one compiled program, per zone
+    layout (a zero-jitter sensor in a plan sized for a Gaussian gives the same histograms within float32
+    rounding). 0 without worlds and for the Mitsuba twin (no plan).
+    """
+    if worlds is None or backend != "fast":
+        return 0.0
+    design = cfg.space.layout_design(cfg.space.zones[0])  # a world's blur is the same in every layout
+    return max((world_sensor(design, cfg.space.sensor, w.sensor).impulse_sigma_ps for w in worlds.worlds),
+               default=0.0)
+
+
 def _world_plan(cfg: DesignConfig) -> robust.WorldPlan:
     """The run's worlds (drawn from its seed) and their scenes."""
     from nlosplan.sensor_models.uncertainty import uncertainty_for
@@ -561,12 +577,11 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
         path = world_reference_path(out, w.index, layout, scenes, sensor)
         paths[(w.index, layout)] = str(path)
         jobs.append(ReferenceJob(str(path), sensor, scenes, f"world {w.index}, {layout}"))
-    # every world with a Gaussian in its impulse response planned for the largest world's: a layout's worlds run
-    # one compiled program (each world's own sigma would round to its own support: world references compiled the
-    # simulator once per 50 ps step); one without (world 0, the nominal model) keeps the nominal reference's plan,
-    # whose program the nominal references stage left in the compilation cache; the twin has no plan to size
-    widest = max((j.sensor.impulse_sigma_ps for j in jobs), default=0.0) if plan.scenes.backend == "fast" else 0.0
-    jobs = [replace(j, min_support_sigma_ps=widest) if j.sensor.impulse_sigma_ps > 0 else j for j in jobs]
+    # every world planned for the largest world's Gaussian, as the nominal references were (_support_sigma): a
+    # layout's worlds run the program the nominal references stage compiled and left in the compilation cache
+    # (each world's own sigma would round to its own support: world references compiled the simulator once per
+    # 50 ps step); the twin has no plan to size
+    jobs = [replace(j, min_support_sigma_ps=_support_sigma(cfg, plan, plan.scenes.backend)) for j in jobs]
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
     _simulate(executor, jobs, say, "world references", cache)
     return paths

@@ -329,10 +329,11 @@ def _moves(sensor: SensorConfig) -> float:
     return move_reach_ps(sensor, max(abs(t0 - hi), abs(t0 + sensor.window_ps - lo)))
 
 
-def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool) -> tuple[str, Term]:
+def _irf_term(sensor: SensorConfig, sigma_max: float, prune: bool, planned: float = 0.0) -> tuple[str, Term]:
     pulse = sensor.pulse_shape is not None
-    if not prune or sigma_max > 0:
-        what = ("measured pulse (*) " if pulse else "") + f"Gaussian (largest sigma {sigma_max:.1f} ps)"
+    if not prune or sigma_max > 0 or planned > 0:
+        what = ("measured pulse (*) " if pulse else "") + f"Gaussian (largest sigma {sigma_max:.1f} ps"
+        what += f"; planned for {planned:.1f} ps, so batches of other jitter share its program)" if planned > 0 else ")"
         return "full", Term(True, "impulse response", what + ", closed form per grid node")
     if pulse:
         return "pulse", Term(False, "impulse response: Gaussian", "jitter 0 and no Gaussian pulse width: only the "
@@ -365,9 +366,10 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
         Leave out terms, zones, cells and samples that cannot contribute.
     min_support_sigma_ps : float
         Size the impulse response's support and the time grid for at least this Gaussian sigma (ps), as for
-        the sensors' own largest (both rounded up to :data:`SUPPORT_SIGMA_STEP_PS`): batches whose sensors differ
-        in jitter (a design run's worlds) then share one structure and one compiled program. It adds only the
-        Gaussian's mass beyond 9 sigma and empty grid bins.
+        the sensors' own largest (both rounded up to :data:`SUPPORT_SIGMA_STEP_PS`), and with a Gaussian in the
+        impulse response even where every sensor's sigma is 0: batches whose sensors differ in jitter (a design
+        run's worlds, and its nominal references without jitter) then share one structure and one compiled
+        program. It adds only the Gaussian's mass beyond 9 sigma and empty grid bins.
 
     Returns
     -------
@@ -443,7 +445,7 @@ def build_plan(scenes, sensors, fidelity="default", *, zones=None, prune: bool =
     if not base.objects:
         terms.append(Term(False, "hidden object", "none in the scene (background, like DENALI's NOOBJECT capture)"))
 
-    irf, irf_term = _irf_term(sensor, sigma_max, prune)
+    irf, irf_term = _irf_term(sensor, sigma_max, prune, float(min_support_sigma_ps))
     terms.append(irf_term)
     lights = any(sc.lights_on for sc in scenes)
     ambient = (lights and any(s.ambient_rate_hz > 0 for s in sensors)) or not prune
