@@ -9,7 +9,8 @@ import pytest
 
 from nlosplan._jax import jax, jnp
 from nlosplan.sensor_models import compiled
-from nlosplan.sensor_models.transient import RowPattern, default_deposit, deposit_at, deposit_method, sum_convolve
+from nlosplan.sensor_models.transient import (RowPattern, default_deposit, deposit_at, deposit_method,
+                                              deposit_sum_convolve, sum_convolve)
 from nlosplan.simulators import FastSimulator, denali_scene
 from nlosplan.sensor_models.presets import resolve_sensor
 
@@ -121,6 +122,73 @@ def test_sum_convolve_derivatives_equal_the_ffts():
     assert np.abs(grads["window"]).max() > 0
     for got in (grads, jacs, hess):
         np.testing.assert_allclose(got["kernel"], got["window"], rtol=1e-9, atol=1e-12)
+
+
+def _detection_leg(rng, m=5, cells=12, z=3, n2=16):
+    """Leg 1 with zero runs, and a detection leg's positions (some off the grid, one NaN), weights (some zero) and
+    zones, as a Lambertian term has them."""
+    a = jnp.asarray(rng.random((m, 20)) * (rng.random((m, 20)) < 0.6))
+    a = a.at[2].set(0.0)  # a sample no light reaches
+    p = rng.uniform(-1.5, n2 + 0.5, (m, cells))
+    p[0, 0] = np.nan
+    w = rng.normal(size=(m, cells)) * (rng.random((m, cells)) < 0.7)
+    zone = rng.integers(0, z, cells)
+    return a, jnp.asarray(p), jnp.asarray(w), RowPattern(jnp.asarray(zone, jnp.int32), z), n2
+
+
+def test_deposit_and_convolve_in_one_pass_equal_the_two_steps_to_the_bit():
+    rng = np.random.default_rng(11)
+    a, p, w, rows, n2 = _detection_leg(rng)
+    m, z = p.shape[0], rows.step
+
+    def two_steps(a, p, w):
+        return sum_convolve(a, deposit_at(p, w, rows, m * z, n2).reshape(m, z, n2), 40)
+
+    for dtype in (jnp.float64, jnp.float32):
+        args = [x.astype(dtype) for x in (a, p, w)]
+        with deposit_method("kernel"):
+            want = np.asarray(jax.jit(two_steps)(*args))
+            got = np.asarray(jax.jit(lambda a, p, w: deposit_sum_convolve(a, p, w, rows, n2, 40))(*args))
+        assert got.dtype == dtype and np.abs(want).max() > 0
+        np.testing.assert_array_equal(got, want)  # the same sums in the same order
+    # a cell of no zone is dropped (the two steps would put it in the next sample's first zone)
+    zone = np.asarray(rows.cells).copy()
+    zone[3] = z
+    with deposit_method("kernel"):
+        dropped = np.asarray(deposit_sum_convolve(a, p, w, RowPattern(jnp.asarray(zone, jnp.int32), z), n2, 40))
+        np.testing.assert_array_equal(dropped, np.asarray(two_steps(a, p, w.at[:, 3].set(0.0))))
+    p = jnp.where(jnp.isnan(p), 3.3, p)  # the XLA scatter keeps a NaN position's NaN
+    with deposit_method("window"):  # the XLA path: the two steps
+        xla = np.asarray(deposit_sum_convolve(a, p, w, rows, n2, 40))
+    with deposit_method("kernel"):
+        want = np.asarray(deposit_sum_convolve(a, p, w, rows, n2, 40))
+    np.testing.assert_allclose(xla, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    with deposit_method("kernel"):  # batched
+        got = np.asarray(jax.vmap(lambda s: deposit_sum_convolve(a * s, p, w, rows, n2, 40))(jnp.asarray([1.0, -2.0])))
+        one = np.asarray(deposit_sum_convolve(a, p, w, rows, n2, 40))
+    np.testing.assert_allclose(got, np.stack([one, -2.0 * one]), rtol=1e-12, atol=1e-12 * np.abs(one).max())
+
+
+def test_deposit_and_convolve_derivatives_equal_the_two_steps():
+    rng = np.random.default_rng(12)
+    a, p, w, rows, n2 = _detection_leg(rng)
+    p = jnp.where(jnp.isnan(p), 3.3, p)  # derivatives at a NaN position are NaN on every path
+    m, z = p.shape[0], rows.step
+    weight = jnp.asarray(rng.normal(size=(z, 20 + n2 - 1)))
+
+    def out(s, fused):
+        aa, pp, ww = a * s[0] + s[1] * a**2, p + s[2], w * s[3]
+        if fused:
+            return deposit_sum_convolve(aa, pp, ww, rows, n2, 40)
+        return sum_convolve(aa, deposit_at(pp, ww, rows, m * z, n2).reshape(m, z, n2), 40)
+
+    s0 = jnp.asarray([1.0, 0.3, 0.05, 1.5])
+    with deposit_method("kernel"):
+        for fn in (lambda f: jax.grad(lambda s: jnp.sum(jnp.sin(out(s, f)) * weight))(s0),
+                   lambda f: jax.jacfwd(lambda s: out(s, f))(s0)):
+            want, got = np.asarray(fn(False)), np.asarray(fn(True))
+            assert np.abs(want).max() > 0
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
 
 
 def test_kernel_drops_nan_positions_and_rows_out_of_range():

@@ -10,6 +10,9 @@ Two linear maps of the fast simulator run as C++ loops (XLA FFI handlers in ``ke
 - ``sum_convolve.cc``: a Lambertian object's two legs convolved and summed over its samples
   (:func:`~nlosplan.sensor_models.transient.sum_convolve`), over the legs' non-zero spans instead of
   FFTs of every (sample, zone) row.
+- ``deposit_convolve.cc``: the detection leg's deposit and that sum in one pass
+  (:func:`~nlosplan.sensor_models.transient.deposit_sum_convolve`), one sample's detection rows at a time in a
+  small buffer instead of the whole (samples, zones, nodes) leg: the same sums in the same order.
 
 The sources ship with the package and are compiled here into one library, once per machine and
 jaxlib version, against the headers jaxlib ships (``jax.ffi.include_dir()``),
@@ -45,7 +48,8 @@ from nlosplan._jax import jax
 from nlosplan.resources import cache_root
 
 #: XLA custom-call targets and the library symbols of their handlers.
-TARGETS = {"nlosplan_deposit": "NlosplanDeposit", "nlosplan_sum_convolve": "NlosplanSumConvolve"}
+TARGETS = {"nlosplan_deposit": "NlosplanDeposit", "nlosplan_sum_convolve": "NlosplanSumConvolve",
+           "nlosplan_deposit_convolve": "NlosplanDepositConvolve"}
 #: Environment variable that turns the kernels off (``0``, ``off``, ``false``, ``no``).
 ENV_SWITCH = "NLOSPLAN_KERNELS"
 #: Compiler flags (no ``-march``: the cached library may be shared by machines with different CPUs).
@@ -53,7 +57,8 @@ FLAGS = ("-O3", "-std=c++17", "-fPIC", "-fno-math-errno")
 #: Longest a build may take, seconds.
 BUILD_TIMEOUT_S = 300
 #: The kernels' C++ sources, compiled into one library.
-SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc"))
+SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc",
+                                                                             "deposit_convolve.cc"))
 
 _STATE: dict = {}  # "ok": bool, "reason": str (when not ok), "path": Path (when ok)
 _REGISTERED: list = []  # the library whose handlers XLA holds in this process
@@ -244,3 +249,32 @@ def sum_convolve(a, b):
     out = jax.ShapeDtypeStruct((z, n1 + n2 - 1), a.dtype)
     return jax.ffi.ffi_call("nlosplan_sum_convolve", out, vmap_method="broadcast_all")(
         a, b, m=np.int64(m), n1=np.int64(n1), z=np.int64(z), n2=np.int64(n2))
+
+
+def deposit_convolve(a, positions, weights, rows, z: int, n2: int):
+    """The detection leg deposited (as :func:`deposit` with ``step=z``) and convolved with leg 1 (as
+    :func:`sum_convolve`) in one custom call (no derivative rule: see ``transient._kernel_deposit_convolve``).
+
+    Parameters
+    ----------
+    a : array, shape (M, N1)
+        Leg 1 of each sample on the node grid.
+    positions, weights : array, shape (M, L)
+        Fractional node positions (on leg 2's grid of ``n2`` nodes) and weights of each sample's detection cells.
+    rows : array of int32, shape (L,)
+        Each cell's zone (0 .. z - 1; others are dropped).
+    z, n2 : int
+        Zones and leg 2's nodes.
+
+    Returns
+    -------
+    array, shape (Z, N1 + N2 - 1)
+        Batched under ``vmap``.
+    """
+    _require()
+    m, n1 = a.shape
+    cells = positions.shape[-1]
+    out = jax.ShapeDtypeStruct((z, n1 + n2 - 1), a.dtype)
+    return jax.ffi.ffi_call("nlosplan_deposit_convolve", out, vmap_method="broadcast_all")(
+        a, positions, weights, rows, m=np.int64(m), n1=np.int64(n1), cells=np.int64(cells), z=np.int64(z),
+        n2=np.int64(n2))

@@ -398,6 +398,65 @@ def sum_convolve(a, b, fft_len: int):
     return _fft_sum_convolve(a, b, int(fft_len))
 
 
+@partial(jax.custom_jvp, nondiff_argnums=(4, 5, 6))
+def _kernel_deposit_convolve(a, p, w, r, z, n2, fft_len):
+    """The compiled deposit-and-sum (:func:`~nlosplan.sensor_models.compiled.deposit_convolve`) with its derivative:
+    that of the deposit followed by the sum-convolution (their own rules), so every mode sees the same derivative
+    as the two kernels' path."""
+    return compiled.deposit_convolve(a, p, w, r, z, n2)
+
+
+@_kernel_deposit_convolve.defjvp
+def _kernel_deposit_convolve_jvp(z, n2, fft_len, primals, tangents):
+    a, p, w, r = primals
+    da, dp, dw, _ = tangents
+    m = p.shape[0]
+
+    def composed(a, p, w):
+        leg2 = _kernel_deposit(p, w, r, m * z, n2, z).reshape(m, z, n2)
+        return _kernel_sum_convolve(a, leg2, fft_len)
+
+    return _kernel_deposit_convolve(a, p, w, r, z, n2, fft_len), jax.jvp(composed, (a, p, w), (da, dp, dw))[1]
+
+
+def deposit_sum_convolve(a, positions, weights, rows: RowPattern, n2: int, fft_len: int):
+    """A Lambertian object's detection leg deposited (:func:`deposit_at`) and summed with leg 1 (:func:`sum_convolve`).
+
+    Parameters
+    ----------
+    a : array, shape (M, N1)
+        Leg 1 of each sample on the node grid.
+    positions, weights : array, shape (M, L)
+        Fractional node positions and weights of each sample's detection cells on leg 2's grid of ``n2`` nodes.
+    rows : RowPattern
+        ``RowPattern(zone_of_cell (L,), Z)``: a row per sample and zone.
+    n2 : int
+        Leg 2's nodes.
+    fft_len : int
+        FFT length of the XLA path, at least ``N1 + n2 - 1``.
+
+    Returns
+    -------
+    array, shape (Z, N1 + n2 - 1)
+        ``sum_convolve(a, deposit_at(positions, weights, rows, M * Z, n2).reshape(M, Z, n2), fft_len)``.
+
+    Notes
+    -----
+    With :func:`deposit_method` ``"kernel"`` (and the kernels available) one compiled pass that never holds the
+    (M, Z, n2) leg (the same sums in the same order as the two kernels, so the same result); otherwise the two
+    steps. Derivatives are the two steps'.
+    """
+    m, z = positions.shape[0], int(rows.step)
+    if _DEPOSIT_METHOD.name == "kernel" and compiled.available():
+        dtype = jnp.result_type(a, positions, weights)
+        p = jnp.asarray(positions, dtype)
+        w = jnp.broadcast_to(jnp.asarray(weights, dtype), p.shape)
+        r = jnp.asarray(rows.cells, jnp.int32).reshape(p.shape[-1:])
+        return _kernel_deposit_convolve(jnp.asarray(a, dtype), p, w, r, z, int(n2), int(fft_len))
+    leg2 = deposit_at(positions, weights, rows, m * z, int(n2)).reshape(m, z, int(n2))
+    return sum_convolve(a, leg2, fft_len)
+
+
 def deposit(grid: TimeGrid, times_ps, weights, rows, n_rows: int, *, bin_width_ps, start_offset_ps):
     """Deposit weighted arrival times onto ``grid`` (see :func:`deposit_at`).
 

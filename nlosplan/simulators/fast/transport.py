@@ -40,7 +40,7 @@ from nlosplan.sensor_models.impulse import impulse_sigma_ps
 from nlosplan.sensor_models.noise import floor_rate_hz, per_bin
 from nlosplan.sensor_models.pipeline import counts_from_rates
 from nlosplan.sensor_models.transient import (RowPattern, bin_nodes_without_irf, deposit, deposit_at, deposit_method,
-                                              irf_matrix, sum_convolve)
+                                              deposit_sum_convolve, irf_matrix)
 from nlosplan.sensor_models.zone_terms import apply_zone_terms, move_nodes, walk_shift_ps, window_light
 from nlosplan.simulators.fast.coupling import _dot, far_coupling, polygon_coupling
 
@@ -223,8 +223,8 @@ def _lambertian(st, a, p, grid, bw, t0):
         path2 = _near_path(a, "2", x, near2, path2)
     t2 = path2 / C_M_PER_PS
     rows2 = RowPattern(a["row2"], st.n_rows)  # a row per sample and zone
-    leg2 = deposit_at(t2 / delta - a["j2"], w2, rows2, m * st.n_rows, st.n2).reshape(m, st.n_rows, st.n2)
-    return jnp.maximum(sum_convolve(leg1, leg2, st.fft_len), 0.0), a["shift"]
+    # the detection leg deposited and convolved in one step (the kernels never hold its (m, zones, n2) array)
+    return jnp.maximum(deposit_sum_convolve(leg1, t2 / delta - a["j2"], w2, rows2, st.n2, st.fft_len), 0.0), a["shift"]
 
 
 def _place(out, shift, n_nodes):
