@@ -221,3 +221,24 @@ def test_flop_estimate_counts_every_path():
     near = bench_metrics.flop_estimate(build_plan(corner_scene(object_xy=(0.3, 0.01)), preset("tmf8828-3x3-short"),
                                                   "draft"))
     assert near["near_field"] > 0  # an object 1 cm from the wall takes the exact form factor
+
+
+def test_a_mount_model_is_also_timed_as_denalis_captures_come():
+    # every object and size at each position: the mount is computed once per position there, not once per scene
+    from nlosplan.reports.bench_text import _model_lines
+    from nlosplan.sensor_models.presets import preset
+
+    said = []
+    out = bench._layout_rate(bench.MODEL_OPTIONS["mixed+mount"], ("A", "S"), ("8in",), range(6),
+                             preset("tmf8828-3x3-short"), "draft", "float32", 1, 0.0, said.append, "mixed+mount")
+    lay = out["layout"]
+    assert {k: lay[k] for k in ("scenes", "positions", "objects_and_sizes")} == {"scenes": 6, "positions": 3,
+                                                                                 "objects_and_sizes": 2}
+    assert math.isfinite(lay["scenes_per_second"]) and lay["scenes_per_second"] > 0
+    assert said == ["models (draft): mixed+mount, 6 scenes as DENALI's layout (2 objects and sizes at 3 positions)"]
+    row = {"model": "mixed+mount", "options": {"mount": True}, "level": "draft", "scenes_per_second": 10.0,
+           "speed_ratio_vs_retroreflective": 0.5, "paths_per_scene": 1000, "rel_l1_error": 0.01,
+           "centroid_shift_bins": 0.02, **out}
+    text = "\n".join(_model_lines([row]))
+    assert "as DENALI's captures come (2 objects and sizes at each of 3 positions, the mount computed once per " \
+           "position)" in text

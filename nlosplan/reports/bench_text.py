@@ -100,6 +100,11 @@ def _model_lines(rows: list) -> list[str]:
                    f"(x{r['speed_ratio_vs_retroreflective']:.2f} of retroreflective in the same run), "
                    f"{r['paths_per_scene']:,} paths, rel L1 {_pct(r['rel_l1_error'])}, centroid "
                    f"{r['centroid_shift_bins']:.3g} bins")
+        lay = r.get("layout")
+        if lay:
+            out.append(f"  as DENALI's captures come ({lay['objects_and_sizes']} objects and sizes at each of "
+                       f"{lay['positions']} positions, the mount computed once per position): "
+                       f"{lay['scenes_per_second']:.4g} scenes/s")
         b = r.get("baseline")
         if b:
             out.append(f"  vs the path before issue 20 ({b['deposit']} deposit, chunks gathered per call, same run): "

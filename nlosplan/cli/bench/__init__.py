@@ -219,9 +219,12 @@ zone alone, lights off vs on), the arithmetic rate against a float32 matrix
 product measured in the same process, and the scene models timed back to back
 at the default level, each against its own reference: retroreflective (the
 preset), mixed (retroreflective 0.36 on a Lambertian base of 0.2, DENALI's
-Table-2 fit) and mixed+mount (with the mount and plate in the signal). Takes
-several minutes (the references).
+Table-2 fit) and mixed+mount (with the mount and plate in the signal; also
+timed as DENALI's captures come, every object and size at each position, where
+the mount is computed once per position). Takes several minutes (the
+references).
 JSON: {"levels": [{"fidelity", "scenes_per_second", "rel_l1_error",
 "centroid_shift_bins", ...}...], "reference", "pruning", "arithmetic",
 "models": [{"model", "scenes_per_second", "speed_ratio_vs_retroreflective",
-"rel_l1_error", "centroid_shift_bins", ...}...], ...}."""
+"rel_l1_error", "centroid_shift_bins", "layout" (mount models: {"scenes",
+"positions", "objects_and_sizes", "scenes_per_second"}), ...}...], ...}."""

@@ -124,7 +124,8 @@ def bench_steps(levels: Sequence[str] = DEFAULT_LEVELS, reference_positions: Seq
                 models: Sequence[str] = tuple(MODEL_OPTIONS), baseline: bool = False) -> int:
     """Number of ``progress`` calls :func:`bench_simulate` makes (for a progress bar)."""
     parts = sum(_lambertian_parts(MODEL_OPTIONS[m]) for m in models)
-    return (2 * len(levels) + 2 * len(reference_positions) + 5 + (2 if baseline else 1) * len(models)
+    mounts = sum(bool(MODEL_OPTIONS[m].get("mount")) for m in models)
+    return (2 * len(levels) + 2 * len(reference_positions) + 5 + (2 if baseline else 1) * len(models) + mounts
             + parts * len(reference_positions))
 
 
@@ -414,6 +415,9 @@ def _models(models, objects, sizes, positions, index, reference_positions, retro
                      "seconds_per_scene_batched": best / len(scenes), "paths_per_scene": sim.plan.paths,
                      "rel_l1_error": err["rel_l1_error"], "centroid_shift_bins": err["centroid_shift_bins"],
                      "errors_per_position": err["per_position"]})
+        if opts.get("mount"):
+            rows[-1].update(_layout_rate(opts, objects, sizes, positions, sensor, level, dtype, repeats, min_seconds,
+                                         say, name))
         if baseline:
             rows[-1].update(_against_baseline(scenes, sim, best, got, ref, index, reference_positions, sensor, level,
                                               dtype, repeats, min_seconds, say, name))
@@ -421,6 +425,23 @@ def _models(models, objects, sizes, positions, index, reference_positions, retro
     for r in rows:
         r["speed_ratio_vs_retroreflective"] = r["scenes_per_second"] / base["scenes_per_second"] if base else math.nan
     return rows
+
+
+def _layout_rate(opts, objects, sizes, positions, sensor, level, dtype, repeats, min_seconds, say, name) -> dict:
+    """A model with the mount timed as DENALI's captures come: every object and size at each of a few positions.
+
+    The timed batch above has one object per position, so each scene computes its own mount; a dataset or a design
+    reference has every object at each position, where the mount is computed once per position and shared
+    (``FastSimulator(share=True)``). The same number of scenes: ``objects x sizes`` at the first positions.
+    """
+    per = len(objects) * len(sizes)
+    at = list(positions)[: max(1, len(positions) // per)]
+    scenes = [denali_scene(o, s, p, **opts) for p in at for o in objects for s in sizes]
+    say(f"models ({level}): {name}, {len(scenes)} scenes as DENALI's layout ({per} objects and sizes at "
+        f"{len(at)} positions)")
+    _, best = _warm_and_time(FastSimulator(scenes, sensor, fidelity=level, dtype=dtype), repeats, min_seconds)
+    return {"layout": {"scenes": len(scenes), "positions": len(at), "objects_and_sizes": per,
+                       "scenes_per_second": len(scenes) / best}}
 
 
 def _against_baseline(scenes, sim, best, got, ref, index, reference_positions, sensor, level, dtype, repeats,
