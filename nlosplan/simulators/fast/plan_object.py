@@ -7,6 +7,7 @@ for a batch of poses, sizes its time axes, and says what it left out.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from collections import OrderedDict
 import math
 from dataclasses import dataclass
@@ -92,12 +93,31 @@ class ObjectPlan:
     near_index: dict
 
 
+#: :func:`_visible_faces` of recent plans, by mesh content, poses and wall: a design run's worlds plan the same
+#: objects at the same poses under other albedos and sensors (0.2 s of a 1,500-scene plan's 0.66 s).
+_VISIBLE_CACHE: OrderedDict = OrderedDict()
+_VISIBLE_CACHE_SIZE = 512
+
+
 def _visible_faces(obj_list: list[HiddenObject], scene: Scene) -> np.ndarray:
     """Faces of ``obj_list[0].mesh`` that see some part of the wall, in front of it, in any pose of the list."""
     mesh = obj_list[0].mesh
-    tri, fn, fa = mesh.triangles, mesh.face_normals, mesh.face_areas
     corners = scene.wall.corners()
     poses = np.unique(np.stack([np.asarray(o.to_world, np.float64) for o in obj_list]), axis=0)  # (P, 4, 4)
+    key = (mesh.content_key, hashlib.sha1(poses.tobytes()).hexdigest(), np.asarray(corners, np.float64).tobytes())
+    hit = _VISIBLE_CACHE.get(key)
+    if hit is None:
+        hit = _VISIBLE_CACHE[key] = _faces_seeing_the_wall(mesh, poses, scene, corners)
+        hit.setflags(write=False)
+        while len(_VISIBLE_CACHE) > _VISIBLE_CACHE_SIZE:
+            _VISIBLE_CACHE.popitem(last=False)
+    _VISIBLE_CACHE.move_to_end(key)
+    return hit
+
+
+def _faces_seeing_the_wall(mesh, poses: np.ndarray, scene: Scene, corners: np.ndarray) -> np.ndarray:
+    """:func:`_visible_faces` for distinct poses (P, 4, 4)."""
+    tri, fn, fa = mesh.triangles, mesh.face_normals, mesh.face_areas
     r, t = poses[:, :3, :3], poses[:, :3, 3]
     n_w, w0 = scene.wall.normal, scene.wall.center
     # every pose at once: a face sees the wall when some corner is in front of it, and is in front of the wall
@@ -142,14 +162,25 @@ def distinct_poses(obj_list: list[HiddenObject]) -> tuple[list[HiddenObject], np
     return first, inverse
 
 
+#: Bounding spheres of recent poses, by mesh content and pose (the worlds' plans pose the same objects again).
+_SPHERE_CACHE: OrderedDict = OrderedDict()
+_SPHERE_CACHE_SIZE = 50_000
+
+
 def _bounding_spheres(obj_list: list[HiddenObject]) -> tuple[np.ndarray, np.ndarray]:
     """Centre (P, 3) and radius (P,) of every pose's vertices."""
     cs, rs = [], []
     for obj in obj_list:
-        v = obj.world_vertices()
-        c = 0.5 * (v.min(0) + v.max(0))
-        cs.append(c)
-        rs.append(float(np.linalg.norm(v - c, axis=1).max()))
+        key = (obj.mesh.content_key, np.asarray(obj.to_world, np.float64).tobytes())
+        hit = _SPHERE_CACHE.get(key)
+        if hit is None:
+            v = obj.world_vertices()
+            c = 0.5 * (v.min(0) + v.max(0))
+            hit = _SPHERE_CACHE[key] = (c, float(np.linalg.norm(v - c, axis=1).max()))
+            if len(_SPHERE_CACHE) > _SPHERE_CACHE_SIZE:
+                _SPHERE_CACHE.popitem(last=False)
+        cs.append(hit[0])
+        rs.append(hit[1])
     return np.array(cs), np.array(rs)
 
 
