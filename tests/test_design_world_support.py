@@ -1,5 +1,6 @@
 """A design run's world references are planned for the largest world sigma: one compiled program per layout."""
 
+import numpy as np
 import pytest
 
 from nlosplan.planner.design import run as design_run
@@ -21,6 +22,48 @@ def test_every_world_reference_is_planned_for_the_widest_world_jitter(tmp_path, 
     # ... and every job carries the widest, world 0 included, so their plans share one support
     assert {j.min_support_sigma_ps for j in seen} == {max(own)} == {design_run._support_sigma(cfg, plan, "fast")}
     assert all(j.to_dict()["min_support_sigma_ps"] == max(own) for j in seen)
+    # the worlds take every second position: each pads its plan to the nominal scenes'
+    assert plan.scenes.positions == cfg.scenes.positions[::2]
+    assert all(j.pad_scenes == cfg.scenes and j.to_dict()["pad_scenes"] == cfg.scenes.to_dict() for j in seen)
+
+
+def test_a_worlds_reference_padded_to_the_nominal_plan_runs_its_program_and_keeps_its_histograms(monkeypatch):
+    from dataclasses import replace
+
+    from nlosplan.planner.design import data
+    from nlosplan.planner.design.data import SceneSet, simulate_reference
+    from nlosplan.sensor_models.presets import preset
+    from nlosplan.simulators import plan_batch
+
+    nominal = SceneSet(objects=("A", "circle"), sizes=("8in",), positions=tuple(range(0, 100, 9)), repeats=1,
+                       crlb_objects=(), fidelity="draft", scene_kwargs={"albedo": 0.36, "diffuse_albedo": 0.2,
+                                                                         "mount": True, "mount_in_background": False})
+    world = replace(nominal, positions=nominal.positions[::2], scene_kwargs={**dict(nominal.scene_kwargs),
+                                                                             "albedo": 0.4})
+    sensor = preset("tmf8828-3x3-short")
+    seen = []
+    real = data.simulate_reference.__globals__["_nominal_plan"]
+    monkeypatch.setattr(data, "_NOMINAL_PLAN", {})
+    monkeypatch.setattr(data, "_nominal_plan", lambda *a: seen.append(real(*a)) or seen[-1])
+    own = simulate_reference(sensor, world)
+    padded = simulate_reference(sensor, world, pad_scenes=nominal)
+    again = simulate_reference(sensor, world, pad_scenes=nominal)
+    assert len(seen) == 2 and seen[0] is seen[1]  # the nominal plan is built once per process and layout
+    np.testing.assert_allclose(padded.means, own.means, rtol=1e-4, atol=1e-6 * own.means.max())
+    np.testing.assert_array_equal(again.means, padded.means)
+    kw = world.options()
+    scenes = [data_scene(o, s, p, kw) for o in world.objects for s in world.sizes for p in world.positions]
+    from nlosplan.simulators.fast.plan import pad_plan
+
+    alone = plan_batch(scenes, sensor, fidelity="draft")
+    assert alone.static != seen[0].static  # every second position alone: smaller time ranges, another program
+    assert pad_plan(alone, seen[0]).static == seen[0].static
+
+
+def data_scene(obj, size, position, kw):
+    from nlosplan.simulators import denali_scene
+
+    return denali_scene(obj, size, position, **kw)
 
 
 def test_the_nominal_references_are_planned_as_the_worlds_are(tmp_path, monkeypatch):

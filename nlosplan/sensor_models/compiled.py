@@ -10,7 +10,7 @@ Two linear maps of the fast simulator run as C++ loops (XLA FFI handlers in ``ke
 - ``sum_convolve.cc``: a Lambertian object's two legs convolved and summed over its samples
   (:func:`~nlosplan.sensor_models.transient.sum_convolve`), over the legs' non-zero spans instead of
   FFTs of every (sample, zone) row.
-- ``deposit_convolve.cc``: the detection leg's deposit and that sum in one pass
+- ``sum_convolve.cc`` also: the detection leg's deposit and that sum in one pass
   (:func:`~nlosplan.sensor_models.transient.deposit_sum_convolve`), one sample's detection rows at a time in a
   small buffer instead of the whole (samples, zones, nodes) leg: the same sums in the same order.
 
@@ -57,8 +57,7 @@ FLAGS = ("-O3", "-std=c++17", "-fPIC", "-fno-math-errno")
 #: Longest a build may take, seconds.
 BUILD_TIMEOUT_S = 300
 #: The kernels' C++ sources, compiled into one library.
-SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc",
-                                                                             "deposit_convolve.cc"))
+SOURCES = tuple(Path(__file__).with_name("kernels") / name for name in ("deposit.cc", "sum_convolve.cc"))
 
 _STATE: dict = {}  # "ok": bool, "reason": str (when not ok), "path": Path (when ok)
 _REGISTERED: list = []  # the library whose handlers XLA holds in this process

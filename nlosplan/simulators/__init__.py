@@ -16,7 +16,7 @@
 """
 
 from nlosplan.simulators.api import (BACKENDS, background_histogram, check_backend, counts_and_jacobian, direct_arrivals,
-                                     expected_batch, expected_histogram, explain, sample, simulate)
+                                     expected_batch, expected_histogram, explain, plan_batch, sample, simulate)
 from nlosplan.simulators.backend import NUISANCE_PARAMETERS, Backend
 from nlosplan.simulators.fast import FIDELITY_LEVELS, FastSimulator, Fidelity, resolve_fidelity
 from nlosplan.simulators.meshes import load_obj, sample_surface, square_patch, surface_quadrature
@@ -49,6 +49,7 @@ __all__ = [
     "denali_scene",
     "direct_arrivals",
     "expected_batch",
+    "plan_batch",
     "expected_histogram",
     "explain",
     "load_obj",

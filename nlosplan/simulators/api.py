@@ -166,6 +166,16 @@ def simulate(scene: Scene, sensor: SensorConfig, *, rng=None, repeats: int = 0, 
                                                      zones=zones, dtype=dtype, prune=prune)
 
 
+def plan_batch(scenes, sensor: SensorConfig, *, fidelity="default", min_support_sigma_ps: float = 0.0) -> SimPlan:
+    """The fast simulator's plan of a batch (what :func:`expected_batch` would compile), without simulating it.
+
+    Pass it as ``pad_to`` to a batch of a subset of these scenes (e.g. a design run's worlds, every second
+    position) so that both run one compiled program.
+    """
+    _check_sensor(sensor)
+    return build_plan(_scene_list(scenes), [sensor], fidelity, min_support_sigma_ps=min_support_sigma_ps)
+
+
 def expected_batch(scenes, sensor: SensorConfig, *, backend: str = "fast", fidelity="default", zones=None,
                    dtype="float32", prune: bool = True, parts: bool = False, chunk: int | None = None,
                    progress=None, pad_to: SimPlan | None = None, min_support_sigma_ps: float = 0.0) -> BatchResult:

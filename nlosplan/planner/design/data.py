@@ -313,8 +313,33 @@ def _scene_labels(objects, sizes, positions, lights) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(REFERENCE_COLUMNS))
 
 
+#: This process's last plan of a zone layout's nominal scenes (:func:`_nominal_plan`): its worlds' references pad to it.
+_NOMINAL_PLAN: dict = {}
+
+
+def _nominal_plan(sensor: SensorConfig, scenes: SceneSet, min_support_sigma_ps: float):
+    """The fast simulator's plan of ``scenes`` (a layout's nominal references) under ``sensor``, kept for the next call.
+
+    A world's references simulate every second position of the nominal scenes: their plan can come out with
+    smaller near-wall blocks or time ranges than the nominal one, hence another compiled program. Padded to this
+    plan, they run the program the references stage compiled. One plan is kept (a worker holds one layout).
+    """
+    from nlosplan.simulators import denali_scene, plan_batch
+
+    key = (json.dumps(scenes.to_dict(), sort_keys=True), sensor.zones_rows, sensor.zones_cols,
+           float(min_support_sigma_ps))
+    if key not in _NOMINAL_PLAN:
+        kw = scenes.options()
+        batch = [denali_scene(obj, s, p, lights=scenes.lights, **kw)
+                 for obj in scenes.objects for s in scenes.sizes for p in scenes.positions]
+        _NOMINAL_PLAN.clear()
+        _NOMINAL_PLAN[key] = plan_batch(batch, sensor, fidelity=scenes.fidelity,
+                                        min_support_sigma_ps=min_support_sigma_ps)
+    return _NOMINAL_PLAN[key]
+
+
 def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
-                       min_support_sigma_ps: float = 0.0) -> ReferenceData:
+                       min_support_sigma_ps: float = 0.0, pad_scenes: SceneSet | None = None) -> ReferenceData:
     """Simulate the reference histograms of one zone layout (the scene set's backend; the bound scenes: fast).
 
     Parameters
@@ -328,6 +353,10 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
         Fast backend: plan the impulse response for at least this Gaussian sigma, ps (references of sensors
         with different jitter then run one compiled program; equal within float32 rounding); 0 for the twin,
         which has no plan (:func:`~nlosplan.simulators.expected_batch` refuses anything else).
+    pad_scenes : SceneSet, optional
+        Fast backend: pad the plan to these scenes' (a superset: the layout's nominal references, of which a
+        world's references take every second position), so both run one compiled program; equal within float32
+        rounding.
 
     Returns
     -------
@@ -350,8 +379,12 @@ def simulate_reference(sensor: SensorConfig, scenes: SceneSet, *, progress=None,
         step = lambda done, total: progress(  # noqa: E731
             f"{sensor.zones_rows}x{sensor.zones_cols} {done}/{total} scenes")
     # the twin's "relay wall only" is said once in the report, not per scene: its warnings are not repeated here
+    pad = None
+    if pad_scenes is not None and scenes.backend == "fast":
+        pad = _nominal_plan(sensor, pad_scenes, min_support_sigma_ps)  # not padded where the worlds' structure differs
     means = np.asarray(expected_batch(batch, sensor, backend=scenes.backend, fidelity=scenes.fidelity,
-                                      progress=step, min_support_sigma_ps=min_support_sigma_ps).expected, np.float32)
+                                      progress=step, min_support_sigma_ps=min_support_sigma_ps,
+                                      pad_to=pad).expected, np.float32)
     sd = scenes.session_sd()
     if not scenes.crlb_objects:
         return ReferenceData(sensor, labels, means=means, source=scenes.backend,
@@ -414,7 +447,8 @@ def build_reference(job) -> dict:
     path = Path(job.path)
     seconds = 0.0
     if not path.exists():
-        ref = simulate_reference(job.sensor, job.scenes, min_support_sigma_ps=job.min_support_sigma_ps)
+        ref = simulate_reference(job.sensor, job.scenes, min_support_sigma_ps=job.min_support_sigma_ps,
+                                 pad_scenes=job.pad_scenes)
         ref.save(path)
         seconds = ref.seconds
     return {"path": str(path), "status": "ok", "seconds": seconds, "scenes": job.scenes.n_scenes,

@@ -148,6 +148,9 @@ class ReferenceJob:
     min_support_sigma_ps : float
         The fast simulator plans the impulse response for at least this Gaussian sigma, ps (a run's worlds: the
         largest of their sensors', so every world of a layout runs one compiled program); 0: the sensor's own.
+    pad_scenes : SceneSet, optional
+        A world's reference: the layout's nominal scenes, whose plan the fast simulator pads to (so the world runs
+        the nominal references' compiled program); None: its own plan.
     """
 
     path: str
@@ -155,10 +158,12 @@ class ReferenceJob:
     scenes: SceneSet
     label: str
     min_support_sigma_ps: float = 0.0
+    pad_scenes: SceneSet | None = None
 
     def to_dict(self) -> dict:
         return {"path": self.path, "sensor": self.sensor.to_dict(), "scenes": self.scenes.to_dict(),
-                "label": self.label, "min_support_sigma_ps": self.min_support_sigma_ps}
+                "label": self.label, "min_support_sigma_ps": self.min_support_sigma_ps,
+                "pad_scenes": None if self.pad_scenes is None else self.pad_scenes.to_dict()}
 
 
 @dataclass(frozen=True)

@@ -581,7 +581,11 @@ def _world_references(cfg: DesignConfig, out: Path, plan: robust.WorldPlan, need
     # layout's worlds run the program the nominal references stage compiled and left in the compilation cache
     # (each world's own sigma would round to its own support: world references compiled the simulator once per
     # 50 ps step); the twin has no plan to size
-    jobs = [replace(j, min_support_sigma_ps=_support_sigma(cfg, plan, plan.scenes.backend)) for j in jobs]
+    # a world's scenes are every scene_step-th position of the nominal ones: padded to the nominal plan (sizes that
+    # a subset of positions can come out smaller in), they run its program
+    pad = cfg.scenes if plan.scenes.backend == "fast" and plan.scenes != cfg.scenes else None
+    jobs = [replace(j, min_support_sigma_ps=_support_sigma(cfg, plan, plan.scenes.backend), pad_scenes=pad)
+            for j in jobs]
     say(f"world references: simulating {len(jobs)} ({plan.scenes.n_scenes} scenes each)")
     _simulate(executor, jobs, say, "world references", cache)
     return paths

@@ -542,9 +542,11 @@ def plan_object(
 
 #: Per-cell arrays of each leg; ``c{leg}t`` is (3, N), the others have the cell axis first.
 _LEG_KEYS = {"1": ("k1", "a1", "r1", "thr1", "l1", "recv", "uv", "jac", "frac", "box1", "cell_row"), "2": ("k2", "a2", "r2", "thr2", "l2", "row2", "box2")}
-#: Wall-cell counts are padded to a multiple of this, near blocks to a multiple of NEAR_BUCKET.
+#: Wall-cell counts are padded to a multiple of this, near blocks to a multiple of NEAR_BUCKET (4: the exact
+#: polygon coupling of a near pair is the costliest per pair, and blocks of 16 computed 3x the needed pairs for
+#: DENALI's mount, up to 5 cells a scene; batches of other sizes still share programs through ``pad_to``).
 CELL_BUCKET = 32
-NEAR_BUCKET = 16
+NEAR_BUCKET = 4
 
 
 def _pad_cells(static: ObjectStatic, arrays: dict, near_index: dict) -> tuple[ObjectStatic, dict]:
