@@ -146,8 +146,9 @@ class ReferenceJob:
     label : str
         E.g. ``"3x3"`` or ``"world 2, 1x1"`` (for progress and the report).
     min_support_sigma_ps : float
-        The fast simulator plans the impulse response for at least this Gaussian sigma, ps (a run's worlds: the
-        largest of their sensors', so every world of a layout runs one compiled program); 0: the sensor's own.
+        The fast simulator plans the impulse response for at least this Gaussian sigma, ps (a design run's
+        references, nominal and worlds': the largest world's, so a layout's references all run one compiled
+        program); 0: the sensor's own.
     pad_scenes : SceneSet, optional
         A world's reference: the layout's nominal scenes, whose plan the fast simulator pads to (so the world runs
         the nominal references' compiled program); None: its own plan.
