@@ -108,7 +108,8 @@ def keep_freed_memory() -> bool:
 
 
 def cache_root() -> Path:
-    """``$NLOSPLAN_CACHE`` or ``~/.cache/nlosplan``: the folder of every cache (programs, references, kernels)."""
+    """``$NLOSPLAN_CACHE`` or ``~/.cache/nlosplan``: the folder of every cache (programs, references, kernels,
+    surface quadratures)."""
     return Path(os.environ.get("NLOSPLAN_CACHE") or Path.home() / ".cache" / "nlosplan")
 
 

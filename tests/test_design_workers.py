@@ -206,12 +206,22 @@ def test_workers_import_torch_only_when_a_job_does_and_then_with_one_thread(monk
 
 
 def test_resident_memory_of_a_process_is_read_from_proc():
-    import numpy as np
+    # a fresh process that holds 200 MB it touched, beside one that holds nearly nothing (this process's own heap
+    # reuses what it freed, so its size says little)
+    import subprocess
+    import sys
 
     from nlosplan.planner.design.executors import _resident_bytes
 
-    before = _resident_bytes(os.getpid())
-    block = np.ones(50_000_000, np.uint8)  # 50 MB touched
-    assert before is not None and _resident_bytes(os.getpid()) >= before + 40_000_000
-    del block
+    code = "import sys; b = b'x' * 200_000_000; print('ready', flush=True); sys.stdin.read()"  # every byte written
+    big = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    small = subprocess.Popen([sys.executable, "-c", code.replace("200_000_000", "1")], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert big.stdout.readline().strip() == "ready" and small.stdout.readline().strip() == "ready"
+        held, bare = _resident_bytes(big.pid), _resident_bytes(small.pid)
+        assert bare is not None and held >= bare + 190_000_000
+    finally:
+        for proc in (big, small):
+            proc.communicate("")
     assert _resident_bytes(2**22 + 12345) is None  # no such process

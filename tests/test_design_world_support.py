@@ -76,7 +76,7 @@ def test_the_nominal_references_are_planned_as_the_worlds_are(tmp_path, monkeypa
                         lambda executor, jobs, say, what, cache, catalog=False: seen.extend(jobs) or ({}, None))
 
     class NotSimulated(Exception):
-        pass
+        """What the references stage does after its jobs (loading their files) is not this test's."""
 
     def load(path):
         raise NotSimulated(path)

@@ -390,7 +390,7 @@ def _save_quadrature(path: Path, q: SurfaceSamples) -> None:
     again, so a failed write is dropped (the result in hand is right either way). No fsync: a torn file after a crash
     fails :func:`_load_quadrature`'s checks and is computed again.
     """
-    try:
+    with contextlib.suppress(OSError):  # a folder or disk that refuses the file: the result in hand stands
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.npz", dir=path.parent)
         try:
@@ -401,8 +401,6 @@ def _save_quadrature(path: Path, q: SurfaceSamples) -> None:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
             raise
-    except OSError:
-        pass
 
 
 #: Surface quadratures computed in this process, by mesh content, point count, faces and knobs (oldest dropped).

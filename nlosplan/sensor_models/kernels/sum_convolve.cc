@@ -42,6 +42,17 @@ namespace {
 #define NLOSPLAN_CLONES
 #endif
 
+// The non-zero span [lo, hi) of a sample's leg 1 (row of n nodes); false when the row is all zeros.
+template <typename T>
+inline bool NonZeroSpan(const T* row, int64_t n, int64_t* lo, int64_t* hi) {
+  int64_t a = 0, b = n;
+  while (a < b && row[a] == T(0)) ++a;
+  while (b > a && row[b - 1] == T(0)) --b;
+  *lo = a;
+  *hi = b;
+  return a < b;
+}
+
 template <typename T>
 NLOSPLAN_CLONES void SumConvolve(const T* a, const T* b, T* out, int64_t batch, int64_t m, int64_t n1, int64_t z,
                                  int64_t n2) {
@@ -53,10 +64,8 @@ NLOSPLAN_CLONES void SumConvolve(const T* a, const T* b, T* out, int64_t batch, 
     T* oe = out + e * z * len;
     for (int64_t i = 0; i < m; ++i) {
       const T* ai = ae + i * n1;
-      int64_t lo = 0, hi = n1;  // the non-zero span of this sample's leg 1
-      while (lo < hi && ai[lo] == T(0)) ++lo;
-      while (hi > lo && ai[hi - 1] == T(0)) --hi;
-      if (lo == hi) continue;
+      int64_t lo, hi;
+      if (!NonZeroSpan(ai, n1, &lo, &hi)) continue;
       const T* span = ai + lo;
       const int64_t width = hi - lo;
       for (int64_t k = 0; k < z; ++k) {
@@ -115,10 +124,8 @@ NLOSPLAN_CLONES void DepositConvolve(const T* a, const T* p, const T* w, const i
     T* oe = out + e * z * len;
     for (int64_t i = 0; i < m; ++i) {
       const T* ai = ae + i * n1;
-      int64_t lo = 0, hi = n1;  // the non-zero span of this sample's leg 1
-      while (lo < hi && ai[lo] == T(0)) ++lo;
-      while (hi > lo && ai[hi - 1] == T(0)) --hi;
-      if (lo == hi) continue;  // no light reaches the sample: its detection leg adds nothing
+      int64_t lo, hi;
+      if (!NonZeroSpan(ai, n1, &lo, &hi)) continue;  // no light reaches the sample: its detection leg adds nothing
       for (int64_t k = 0; k < z; ++k) {
         lo_z[k] = n2;
         hi_z[k] = 0;
