@@ -252,10 +252,12 @@ def test_emulator_answers_o_and_O_with_the_firmwares_own_lines():
 
     from nlosplan.hardware.emulators import EmulatedTMF8828
 
-    with EmulatedTMF8828(lambda z, r: (np.zeros((int(z[0]), int(z[0]), 128)), 100.0)) as emu:
+    # the help screen 0.3 s after the port opens: pyserial empties the input buffer once it has opened the port, so
+    # a screen sent at once was lost whenever the emulator saw the opening first (a loaded machine)
+    with EmulatedTMF8828(lambda z, r: (np.zeros((int(z[0]), int(z[0]), 128)), 100.0), boot_s=0.3) as emu:
         ser = serial.Serial(emu.port, 115200, timeout=0)
         try:
-            boot = _say(ser, b"", 0.3, until=lambda ls: "# ... reset" in ls)
+            boot = _say(ser, b"", 0.5, until=lambda ls: "# ... reset" in ls)
             assert boot[0] == "TMF8828 Arduino Driver" and boot[-1] == "# ... reset"   # setupFn's help screen
             assert _say(ser, b"d") == ["TMF8828 state=disabled"]
             # the device is off: the mode switch's register check times out (driver log level ERROR at start-up)

@@ -78,10 +78,14 @@ class EmulatedTMF8828(PtyDevice):
     faults : SensorFaults, optional
     address : int
         I2C address printed in every line (65 = 0x41).
+    boot_s : float
+        Seconds from the port's opening to setupFn's help screen (the real board: after the Uno's bootloader). 0
+        sends it at once, where a driver that opens the port with pyserial usually never sees it: pyserial
+        empties the input buffer after it opens the port, so the screen is dropped when it comes first.
     """
 
     def __init__(self, expected: Callable, *, frame_period_s: float = 0.05, seed: int = 0,
-                 faults: SensorFaults | None = None, address: int = 65) -> None:
+                 faults: SensorFaults | None = None, address: int = 65, boot_s: float = 0.0) -> None:
         super().__init__("lidar")
         self.expected = expected
         self.frame_period_s = frame_period_s
@@ -89,6 +93,7 @@ class EmulatedTMF8828(PtyDevice):
         self.faults = faults or SensorFaults()
         self._frng = np.random.default_rng(self.faults.seed)
         self.address = address
+        self.boot_s = float(boot_s)
         self._flock = threading.Lock()
         self._firmware_reset()
         self.frames_sent = 0
@@ -140,8 +145,11 @@ class EmulatedTMF8828(PtyDevice):
         with self._flock:   # an Arduino Uno resets when its port opens; setupFn prints the help screen
             self._firmware_reset()
             self._pending.clear()
+            if self.boot_s > 0:
+                self._pending.append((time.monotonic() + self.boot_s, list(HELP)))
         self.drop_output()
-        self.send("".join(f"{ln}\n" for ln in HELP))
+        if self.boot_s <= 0:
+            self.send("".join(f"{ln}\n" for ln in HELP))
 
     def on_bytes(self, data: bytes) -> None:
         for ch in data.decode("ascii", errors="replace"):
