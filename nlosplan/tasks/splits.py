@@ -26,7 +26,7 @@ import pandas as pd
 from sklearn.model_selection import train_test_split
 
 from nlosplan.errors import UserError
-from nlosplan.data.dataset import Dataset, scene_keys
+from nlosplan.data.dataset import Dataset, scene_groups
 from nlosplan.tasks.names import SPLITS, TASK_LABEL, TASKS  # noqa: F401 (SPLITS re-exported)
 
 __all__ = ["SPLITS", "Split", "heldout_objects", "heldout_positions", "heldout_sizes", "make_split",
@@ -117,7 +117,7 @@ def stratified_split(y, *, test_size: float = 0.3, seed: int = 42) -> Split:
 
 def _scene_groups(labels: pd.DataFrame) -> np.ndarray:
     """Group number of every row: rows of one scene (its repeats) share it, numbered in order of appearance."""
-    return pd.factorize(scene_keys(labels))[0]
+    return scene_groups(labels)
 
 
 def _rows_of(groups: np.ndarray, chosen: np.ndarray) -> np.ndarray:
