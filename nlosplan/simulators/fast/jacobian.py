@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlosplan._jax import FAST_COMPILE, jax, jnp
+from nlosplan._jax import jax, jnp
 from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.transient import deposit_method
 from nlosplan.simulators.fast.simulator import FastSimulator, to_jax
@@ -143,9 +143,8 @@ def _lam_jac(static, names, arrays, scenes_p, sensor_p, axes, theta, steps, shar
         return jax.lax.map(one, (scenes_p, shared_nodes))
 
 
-# compiled once per reference; faster to compile without XLA's fusion emitters (nlosplan._jax.FAST_COMPILE)
-_TERM_NODES = jax.jit(_term_nodes, static_argnums=(0, 7), compiler_options=FAST_COMPILE or None)
-_LAM_JAC = jax.jit(_lam_jac, static_argnums=(0, 1, 8), compiler_options=FAST_COMPILE or None)
+_TERM_NODES = jax.jit(_term_nodes, static_argnums=(0, 7))
+_LAM_JAC = jax.jit(_lam_jac, static_argnums=(0, 1, 8))
 
 
 def counts_and_jacobian(scenes, sensor: SensorConfig, *, fidelity="default", names=("photon_scale",), axes,

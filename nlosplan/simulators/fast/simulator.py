@@ -12,7 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from nlosplan._jax import FAST_COMPILE, jax, jnp
+from nlosplan._jax import jax, jnp
 from nlosplan.errors import UserError
 from nlosplan.resources import default_threads
 from nlosplan.sensor_models.config import SensorConfig
@@ -83,10 +83,8 @@ def _batched_shared(static, arrays, scene_p, terms, parts, only, nodes):
 
 _TERMS = jax.jit(_sensor_terms, static_argnums=(0,))
 _BATCHED_TERMS = jax.jit(_batched_terms, static_argnums=(0, 4))
-# the shared-term programs (a design run's references: the mount in the signal) compile ~20 % faster without XLA's
-# fusion emitters at an equal run time (nlosplan._jax.FAST_COMPILE); the plain batched one would run slower with them
-_SHARED = jax.jit(_shared_nodes, static_argnums=(0, 4), compiler_options=FAST_COMPILE or None)
-_BATCHED_SHARED = jax.jit(_batched_shared, static_argnums=(0, 4, 5), compiler_options=FAST_COMPILE or None)
+_SHARED = jax.jit(_shared_nodes, static_argnums=(0, 4))
+_BATCHED_SHARED = jax.jit(_batched_shared, static_argnums=(0, 4, 5))
 
 
 def sensor_params(sensor: SensorConfig) -> dict:
