@@ -64,8 +64,8 @@ def default_threads() -> int:
 MALLOC_ENV = "NLOSPLAN_KEEP_FREED_MEMORY"
 #: glibc ``mallopt`` parameters and the values :func:`keep_freed_memory` sets (bytes).
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-TRIM_THRESHOLD_BYTES = 256 * 1024**2
-MMAP_THRESHOLD_BYTES = 32 * 1024**2
+TRIM_THRESHOLD_BYTES = 1024**3
+MMAP_THRESHOLD_BYTES = 1024**3
 _kept: bool | None = None
 
 
@@ -74,15 +74,18 @@ def keep_freed_memory() -> bool:
 
     glibc's allocator serves blocks over 128 KiB with a fresh ``mmap`` and unmaps them when freed, and
     gives the top of its heap back above 128 KiB free (both limits rise on their own only after a larger
-    block is freed): a loop that allocates and frees the same megabyte-sized arrays then pays a page fault
-    for every 4 KiB page every time. In a fresh process a 1D CNN training step (batch 64, 128 bins, width
-    0.25) took 1,000-2,600 page faults and 12-15 ms, and 0-3 faults and 8.6-10 ms with blocks up to
-    :data:`MMAP_THRESHOLD_BYTES` served from the heap and up to :data:`TRIM_THRESHOLD_BYTES` of free heap
-    kept (identical arithmetic, so identical results). In the design workers, which free large arrays
-    first, the limits had mostly risen already: there it halves the page faults, and the ideal observer's
-    evaluations took 9-18 % less time in two pairs of cached main-job runs (the whole run within this
-    machine's noise). The process keeps at most that much more memory than it uses. The CLI and every
-    design worker call this at start; ``NLOSPLAN_KEEP_FREED_MEMORY=0`` leaves the allocator alone.
+    block is freed, and never past 32 MiB): a loop that allocates and frees the same large arrays then pays a
+    page fault for every page every time. In a fresh process a 1D CNN training step (batch 64, 128 bins, width
+    0.25) took 1,000-2,600 page faults and 12-15 ms, and 0-3 faults and 8.6-10 ms with blocks up to 32 MiB
+    served from the heap and 256 MiB of free heap kept (identical arithmetic, so identical results). An 8x8
+    design's evaluations handle (3,000 x 8,192) float64 arrays, 197 MB each: blocks up to
+    :data:`MMAP_THRESHOLD_BYTES` come from the heap and up to :data:`TRIM_THRESHOLD_BYTES` of it stays free,
+    and numpy is told not to ask for transparent huge pages for its arrays (each huge page fault zeroes
+    2 MiB, and with the kernel's ``madvise`` defragmentation may compact memory first). 40 shape and size
+    evaluations at 3x3, 4x4 and 8x8 in one process, one thread: 27.0-27.2 s (5.9-6.4 s of it in the kernel) with
+    the 32 MiB / 256 MiB limits, 23.8 s (2.8 s in the kernel) with these; 27.6 s with glibc's own. The process keeps at most that much more memory than it uses. The
+    CLI and every design worker call this at start; ``NLOSPLAN_KEEP_FREED_MEMORY=0`` leaves the allocator
+    and numpy alone.
 
     Returns
     -------
@@ -104,7 +107,20 @@ def keep_freed_memory() -> bool:
             # trim first: setting either fixes both (glibc then stops adjusting them itself)
             _kept = bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES)
                          and mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
+            if _kept:
+                _no_huge_pages()
     return _kept
+
+
+def _no_huge_pages() -> None:
+    """Tell numpy not to advise transparent huge pages for its arrays (its default on Linux; see
+    :func:`keep_freed_memory`). A numpy without the switch is left as it is."""
+    import numpy as np
+
+    switch = getattr(getattr(np, "_core", None), "multiarray", None)
+    setter = getattr(switch, "_set_madvise_hugepage", None)
+    if setter is not None:
+        setter(False)
 
 
 def cache_root() -> Path:
