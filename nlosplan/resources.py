@@ -82,10 +82,10 @@ def keep_freed_memory() -> bool:
     :data:`MMAP_THRESHOLD_BYTES` come from the heap and up to :data:`TRIM_THRESHOLD_BYTES` of it stays free,
     and numpy is told not to ask for transparent huge pages for its arrays (each huge page fault zeroes
     2 MiB, and with the kernel's ``madvise`` defragmentation may compact memory first). 40 shape and size
-    evaluations at 3x3, 4x4 and 8x8 in one process, one thread: 27.0-27.2 s (5.9-6.4 s of it in the kernel) with
-    the 32 MiB / 256 MiB limits, 23.8 s (2.8 s in the kernel) with these; 27.6 s with glibc's own. The process keeps at most that much more memory than it uses. The
-    CLI and every design worker call this at start; ``NLOSPLAN_KEEP_FREED_MEMORY=0`` leaves the allocator
-    and numpy alone.
+    evaluations at 3x3, 4x4 and 8x8 in one process, one thread: 27.0-27.2 s (5.9-6.4 s of it in the kernel)
+    with the 32 MiB / 256 MiB limits, 23.8 s (2.8 s in the kernel) with these; 27.6 s with glibc's own. The
+    process keeps at most that much more memory than it uses. The CLI and every design worker call this at
+    start; ``NLOSPLAN_KEEP_FREED_MEMORY=0`` leaves the allocator and numpy alone.
 
     Returns
     -------
