@@ -145,22 +145,27 @@ def _in_one_worker(fn) -> dict:
     return res
 
 
-def _faults_per_round(job) -> dict:
-    """Minor page faults of allocating and freeing four 1 MiB arrays, per round (after a warm-up)."""
+def _faults_of(round_, warm: int, rounds: int) -> dict:
+    """Minor page faults per call of ``round_`` (after ``warm`` calls), in this process."""
     import resource
 
+    for _ in range(warm):
+        round_()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(rounds):
+        round_()
+    return {"faults": (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / rounds}
+
+
+def _faults_per_round(job) -> dict:
+    """Minor page faults of allocating and freeing four 1 MiB arrays, per round (after a warm-up)."""
     import numpy as np
 
     def round_():
         arrays = [np.ones(1 << 18, np.float32) for _ in range(4)]  # 1 MiB each: above glibc's default mmap threshold
         return sum(float(a[-1]) for a in arrays)
 
-    for _ in range(5):
-        round_()
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    for _ in range(50):
-        round_()
-    return {"faults": (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 50}
+    return _faults_of(round_, 5, 50)
 
 
 def test_workers_reuse_freed_memory_instead_of_faulting_it_in_again():
@@ -192,8 +197,6 @@ def test_keep_freed_memory_reports_whether_it_is_in_force(monkeypatch):
 
 def _big_block_faults(job) -> dict:
     """Page faults of one round that allocates, fills and frees a 200 MB block (an 8x8 evaluation's array)."""
-    import resource
-
     import numpy as np
 
     def round_():
@@ -201,11 +204,7 @@ def _big_block_faults(job) -> dict:
         a.fill(1.0)
         return float(a[-1])
 
-    round_()
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    for _ in range(3):
-        round_()
-    return {"faults": (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 3}
+    return _faults_of(round_, 1, 3)
 
 
 def test_workers_reuse_a_freed_200_mb_block_too():

@@ -115,11 +115,6 @@ def stratified_split(y, *, test_size: float = 0.3, seed: int = 42) -> Split:
     return Split(tr, te, "random", {"seed": seed, "test_size": test_size, "stratified": True})
 
 
-def _scene_groups(labels: pd.DataFrame) -> np.ndarray:
-    """Group number of every row: rows of one scene (its repeats) share it, numbered in order of appearance."""
-    return scene_groups(labels)
-
-
 def _rows_of(groups: np.ndarray, chosen: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.isin(groups, chosen))
 
@@ -129,7 +124,7 @@ def task_random_split(dataset: Dataset, task: str, *, test_size: float = 0.3, se
 
     Repeats of one scene stay on one side (splits are drawn over scenes).
     """
-    groups = _scene_groups(dataset.labels)
+    groups = scene_groups(dataset.labels)  # a scene's repeats share its number
     first = pd.Series(np.arange(len(groups))).groupby(groups).first().to_numpy()
     if task == "loc":
         s = random_split(len(first), test_size=test_size, seed=seed)
