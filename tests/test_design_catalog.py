@@ -16,7 +16,7 @@ def _fake_run(calls):
 def test_catalog_runs_once_per_code_version_and_is_marked_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
     calls, said = [], []
-    monkeypatch.setattr("nlosplan.stability.run_cases", _fake_run(calls))
+    monkeypatch.setattr("nlosplan.stability.run_apart", _fake_run(calls))
     first = catalog.stability_summary(False, True, said.append)
     assert first["cached"] is False and (first["passed"], first["total"], first["failed"]) == (1, 2, ["b"])
     assert said == ["stability: the catalog"] and len(calls) == 1 and calls[0] > 10
@@ -32,7 +32,7 @@ def test_catalog_runs_once_per_code_version_and_is_marked_cached(tmp_path, monke
 def test_a_damaged_entry_is_run_again_and_replaced(tmp_path, monkeypatch):
     monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path))
     calls = []
-    monkeypatch.setattr("nlosplan.stability.run_cases", _fake_run(calls))
+    monkeypatch.setattr("nlosplan.stability.run_apart", _fake_run(calls))
     path = tmp_path / "stability" / f"{catalog.catalog_key()}.json"
     path.parent.mkdir(parents=True)
     path.write_text("{not json")
@@ -56,7 +56,7 @@ def test_the_catalog_runs_beside_the_references_largest_first(tmp_path, monkeypa
 
     monkeypatch.setenv("NLOSPLAN_CACHE", str(tmp_path / "cache"))
     calls, order = [], []
-    monkeypatch.setattr("nlosplan.stability.run_cases", _fake_run(calls))
+    monkeypatch.setattr("nlosplan.stability.run_apart", _fake_run(calls))
 
     def fake_reference(job):
         order.append(job.label)

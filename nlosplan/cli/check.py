@@ -7,11 +7,11 @@ from nlosplan.cli.common import emit, progress_bar, sub_parser
 
 def _cmd_check(args) -> int:
     from nlosplan.reports.tables import format_table
-    from nlosplan.stability import all_cases, run_cases
+    from nlosplan.stability import all_cases, run_apart
 
     cases = all_cases()
     with progress_bar(args, len(cases), "stability cases", "case") as bar:
-        results = run_cases(cases, None if bar is None else lambda _r: bar.update(1))
+        results = run_apart(cases, None if bar is None else lambda _r: bar.update(1))
     ok = all(r.passed for r in results)
     data = {"passed": ok, "cases": [{"name": r.name, "passed": r.passed, "requirement": r.requirement,
                                      "detail": r.detail, "seconds": round(r.seconds, 3)} for r in results]}

@@ -2,9 +2,9 @@
 
 The catalog (:mod:`nlosplan.stability`: stiff and extreme cases of the sensor models and simulators) checks the
 code, not the run's inputs: its result depends only on the source of the rooms it covers and on the numerical
-libraries. The full main job runs it once (about 2.5 minutes on this 2-core machine), as one more job on its executor
-beside the references it simulates (:func:`run_catalog`; in this process at the end when no reference is simulated),
-and keeps the summary in ``$NLOSPLAN_CACHE/stability/KEY.json`` (or ``~/.cache/nlosplan/stability``), KEY the SHA-256 of
+libraries. The full main job runs it once (about a minute on this 2-core machine, in a process of its own:
+:func:`~nlosplan.stability.run_apart`), as one more job on its executor beside the references it simulates
+(:func:`run_catalog`; from this process at the end when no reference is simulated), and keeps the summary in ``$NLOSPLAN_CACHE/stability/KEY.json`` (or ``~/.cache/nlosplan/stability``), KEY the SHA-256 of
 :func:`~nlosplan.planner.design.reference_cache.code_version`, the source of the catalog and runner, and the
 versions of JAX, jaxlib and NumPy; a later run with the same key reports that summary, marked ``cached``.
 ``--no-cache`` runs it regardless. An unreadable entry is run again and replaced.
@@ -62,7 +62,8 @@ def kept_summary(quick: bool, cache: bool = True) -> dict | None:
 
 
 def run_catalog(job=None) -> dict:
-    """Run the whole catalog here; its summary (module-level, so a design run's executor can run it as a job).
+    """Run the whole catalog (in a process of its own: :func:`~nlosplan.stability.run_apart`); its summary
+    (module-level, so a design run's executor can run it as a job).
 
     Parameters
     ----------
@@ -74,10 +75,10 @@ def run_catalog(job=None) -> dict:
     dict
         ``status`` (``"ok"``), ``ran``, ``passed``, ``total``, ``failed`` (case names), ``seconds``.
     """
-    from nlosplan.stability import all_cases, run_cases
+    from nlosplan.stability import all_cases, run_apart
 
     t0 = time.perf_counter()
-    results = run_cases(all_cases())
+    results = run_apart(all_cases())
     return {"status": "ok", "ran": True, "passed": sum(r.passed for r in results), "total": len(results),
             "failed": [r.name for r in results if not r.passed], "seconds": time.perf_counter() - t0}
 
@@ -109,11 +110,15 @@ def stability_summary(quick: bool, cache: bool = True, say=None) -> dict:
     -------
     dict
         ``ran``, ``passed``, ``total``, ``failed`` (case names), ``seconds`` (of the run that computed it) and
-        ``cached`` (True when taken from an earlier run).
+        ``cached`` (True when taken from an earlier run); or ``ran`` False and a ``note`` when the catalog's
+        process stopped before its end (nothing is kept then: the next run tries again).
     """
     kept = kept_summary(quick, cache)
     if kept is not None:
         return kept
     if say:
         say("stability: the catalog")
-    return keep(run_catalog(), cache)
+    try:
+        return keep(run_catalog(), cache)
+    except RuntimeError as exc:  # its process died (memory, a signal): the run's results stand without it
+        return {"ran": False, "note": f"did not finish: {exc}; run `nlosplan check`"}
