@@ -116,12 +116,12 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     # nothing to simulate: the workers are kept
     assert run._simulate(ex, [], lambda *a: None, "references", cache=False) == ({}, None)
     assert ex.recycled == 1
-    # the catalog never runs beside a layout's programs; in this process, recycling drops what is held
+    # the catalog runs in a process of its own: what this one holds stays; recycling drops it
     monkeypatch.setattr(run, "run_catalog", lambda job: held.append((workers._held, len(cleared))) or {})
     run._prepare(CatalogJob())
-    assert held[-1] == ("catalog", 2)
+    assert held[-1] == ("1x1", 1)
     SerialExecutor().recycle()
-    assert len(cleared) == 3 and workers._held is None
+    assert len(cleared) == 2 and workers._held is None
     # a failing job leaves its programs held until the next layout's job drops them
     def boom(job):
         raise RuntimeError("boom")
@@ -132,7 +132,7 @@ def test_a_simulation_stage_that_ran_recycles_the_workers_and_drops_compiled_pro
     assert workers._held == "3x3"
     monkeypatch.setattr(run, "build_reference", built)
     run._prepare(jobs[-1])
-    assert held[-1] == ("1x1", 4)
+    assert held[-1] == ("1x1", 3)
 
 
 def _in_one_worker(fn) -> dict:
