@@ -21,7 +21,7 @@ With no options: the DENALI rig and DENALI's TMF8828 as calibrated on the real T
 per bin; [space] reference in --config picks another sensor), the three
 tasks with the default requirements (localization RMSE <= 0.05 m, shape top-1 >= 0.35,
 size accuracy >= 0.90), the default design space (zones 1x1..8x8, bins merged up to 8x,
-32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). 6 to 16 minutes the
+32-128 bins, jitter and pulse 0-1000 ps, 1-100 % of the photons). 5 to 16 minutes the
 first time on an idle 2-core machine, by its speed (1.5 to 4 of them simulating the references,
 compiling and checking the simulator's stability; the learners, the worlds' references and the
 optimizer on the bounds are most of the rest); --quick runs a reduced space (1 to 2.5 minutes
