@@ -47,3 +47,55 @@ def test_a_design_runs_summary_says_so_when_the_catalog_did_not_finish(tmp_path,
     assert summary == {"ran": False, "note": "did not finish: the stability catalog's process stopped (exit -9) after "
                                              "3 of 51 cases: Killed; run `nlosplan check`"}
     assert not (tmp_path / "stability").exists()  # nothing kept: the next run tries again
+
+
+def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path):
+    """A design worker that ends (or is killed) does not leave the catalog running for a minute."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    pidfile = tmp_path / "child.pid"
+    starter = (
+        "import subprocess, sys\n"
+        "from nlosplan.stability import catalog_env\n"
+        "p = subprocess.Popen([sys.executable, '-c', 'from nlosplan.stability import _child; _child()',"
+        " 'gradients-transport'], env=catalog_env(), stdout=subprocess.DEVNULL)\n"
+        f"open({str(pidfile)!r}, 'w').write(str(p.pid))\n"
+        "p.wait()\n")
+    parent = subprocess.Popen([sys.executable, "-c", starter])
+    deadline = time.monotonic() + 60
+    while not (pidfile.exists() and pidfile.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    child = int(pidfile.read_text())
+    time.sleep(1.0)  # the child is importing or compiling the case that takes ~20 s
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            break
+        try:  # reap it if it became ours (it is re-parented to init, or to a subreaper such as pytest's)
+            os.waitpid(child, os.WNOHANG)
+        except ChildProcessError:
+            pass
+        time.sleep(0.1)
+    else:
+        os.kill(child, signal.SIGKILL)
+        raise AssertionError("the catalog's process outlived the process that started it by 10 s")
+
+
+def test_check_says_in_one_line_when_the_cases_process_dies(capsys, monkeypatch):
+    from nlosplan.cli import main
+
+    def dies(cases, progress=None):
+        raise RuntimeError("the stability catalog's process stopped (exit -9) after 3 of 51 cases: Killed")
+
+    monkeypatch.setattr("nlosplan.stability.run_apart", dies)
+    assert main(["check"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == "nlosplan check: the stability catalog's process stopped (exit -9) after 3 of 51 cases: Killed"

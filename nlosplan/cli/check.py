@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 
 from nlosplan.cli.common import emit, progress_bar, sub_parser
 
@@ -10,8 +11,12 @@ def _cmd_check(args) -> int:
     from nlosplan.stability import all_cases, run_apart
 
     cases = all_cases()
-    with progress_bar(args, len(cases), "stability cases", "case") as bar:
-        results = run_apart(cases, None if bar is None else lambda _r: bar.update(1))
+    try:
+        with progress_bar(args, len(cases), "stability cases", "case") as bar:
+            results = run_apart(cases, None if bar is None else lambda _r: bar.update(1))
+    except RuntimeError as exc:  # the cases' process died (memory, a signal): one line, a failed check
+        print(f"nlosplan check: {exc}", file=sys.stderr)
+        return 1
     ok = all(r.passed for r in results)
     data = {"passed": ok, "cases": [{"name": r.name, "passed": r.passed, "requirement": r.requirement,
                                      "detail": r.detail, "seconds": round(r.seconds, 3)} for r in results]}
