@@ -256,3 +256,66 @@ def test_without_keeping_freed_memory_a_200_mb_block_faults_in_again(monkeypatch
     # the control of the test above (284 faults a round here with transparent huge pages on request, ~48,800 with none)
     monkeypatch.setenv("NLOSPLAN_KEEP_FREED_MEMORY", "0")
     assert _in_one_worker(_big_block_faults)["faults"] > 50  # at least ~95 huge pages
+
+
+def _ended(pid: int) -> bool:
+    """Whether process ``pid`` has ended (gone, or a zombie not yet reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except FileNotFoundError:
+        return True
+
+
+def test_closed_and_recycled_pools_end_their_workers_without_being_waited_for():
+    import time
+
+    pool = PoolExecutor(2)
+    first = {res for _, res in pool.map(_pid, [_Probe()] * 4)}
+    assert pool.recycle(1) is True
+    second = {res for _, res in pool.map(_pid, [_Probe()] * 4)}
+    pool.close()
+    deadline = time.monotonic() + 20
+    while not all(_ended(p) for p in first | second) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert all(_ended(p) for p in first | second), "workers still running 20 s after close"
+
+
+def _nap(job) -> int:
+    import os
+    import time
+
+    time.sleep(job)
+    return os.getpid()
+
+
+def test_close_does_not_wait_for_a_worker_still_busy():
+    import time
+
+    pool = PoolExecutor(2)
+    results = pool.map(_nap, [0.0, 3.0], ahead=2)
+    next(results)  # the short job's; the long one is running
+    t0 = time.perf_counter()
+    pool.close()
+    assert time.perf_counter() - t0 < 1.5  # waiting would take the long job's remaining ~3 s
+
+
+def _slow_teardown(job) -> int:
+    import atexit
+    import os
+    import time
+
+    atexit.register(time.sleep, 5.0)  # as a library's exit handler or the modules' teardown could take
+    return os.getpid()
+
+
+def test_a_stopped_worker_ends_without_the_interpreters_teardown():
+    import time
+
+    pool = PoolExecutor(1)
+    (_, pid), = list(pool.map(_slow_teardown, [_Probe()]))
+    t0 = time.perf_counter()
+    pool.close()
+    while not _ended(pid) and time.perf_counter() - t0 < 10:
+        time.sleep(0.02)
+    assert _ended(pid) and time.perf_counter() - t0 < 3.0  # the 5 s exit handler never ran

@@ -10,7 +10,8 @@ __all__ = ["WatchParent"]
 
 
 class WatchParent(WorkerPlugin):
-    """Every worker of a LocalCluster (restarts included) starts with :func:`init_worker`: it ends with ``parent``.
+    """Every worker of a LocalCluster (restarts included) starts with :func:`init_worker`: it ends with ``parent``
+    (and exits the ordinary way: Dask stops its workers itself).
 
     Parameters
     ----------
@@ -24,4 +25,4 @@ class WatchParent(WorkerPlugin):
         self.parent = parent
 
     def setup(self, worker) -> None:
-        init_worker(self.parent)
+        init_worker(self.parent, quick_exit=False)  # Dask ends its workers itself
