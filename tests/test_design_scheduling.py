@@ -2,6 +2,7 @@
 
 import math
 
+from nlosplan.planner.design.evaluation import Evaluation
 from nlosplan.planner.design.jobs import DesignJob
 from nlosplan.planner.design.scheduling import SECONDS_PER_CELL, RunTimes, job_kind
 from nlosplan.planner.design.space import Design
@@ -13,7 +14,9 @@ def _job(evaluator, task, zones, n_bins=128, train=None, seed=0):
 
 
 def _record(job, seconds):
-    return {**job.to_dict(), "seconds": seconds}
+    """The job's result as the search reads it (a record with a value, through :meth:`Evaluation.from_record`)."""
+    return Evaluation.from_record({**job.to_dict(), "metric": "m", "value": 0.5, "lo": 0.4, "hi": 0.6,
+                                   "status": "ok", "reason": "", "extra": {}, "seconds": seconds})
 
 
 def test_unmeasured_kinds_are_ordered_by_cells_and_training_captures():
@@ -27,7 +30,7 @@ def test_unmeasured_kinds_are_ordered_by_cells_and_training_captures():
 
 def test_a_measured_kind_takes_its_mean_and_ties_keep_their_order():
     small, large = _job("bound", "loc", (8, 8)), _job("trained", "size", (2, 2))
-    t = RunTimes([_record(small, 0.05), _record(small, 0.07), _record(large, 0.9), {"seconds": None}])
+    t = RunTimes([_record(small, 0.05), _record(small, 0.07), _record(large, 0.9)])
     assert math.isclose(t.estimate(small), 0.06) and math.isclose(t.estimate(large), 0.9)
     assert t.longest_first([small, large]) == [large, small]
     a, b = _job("trained", "size", (2, 2), seed=1), _job("trained", "size", (2, 2), seed=2)
@@ -36,9 +39,8 @@ def test_a_measured_kind_takes_its_mean_and_ties_keep_their_order():
     assert math.isclose(t.estimate(large), 0.9)
 
 
-def test_a_jobs_kind_and_its_records_kind_are_one():
+def test_a_jobs_kind_and_its_results_kind_are_one():
     job = _job("learning_curve", "shape", (3, 3), n_bins=64, train=4200)
-    rec = _record(job, 1.0)
-    assert job_kind(rec["evaluator"], rec["task"], rec["design"]["zones"], rec["design"]["n_bins"],
-                    rec["fidelity"]["train_captures"]) == ("learning_curve", "shape", "3x3", 64, 4200)
-    assert RunTimes([rec]).estimate(job) == 1.0
+    ev = _record(job, 1.0)
+    assert job_kind(job) == job_kind(ev) == ("learning_curve", "shape", "3x3", 64, 4200)
+    assert RunTimes([ev]).estimate(job) == 1.0

@@ -4,7 +4,8 @@ The catalog (:mod:`nlosplan.stability`: stiff and extreme cases of the sensor mo
 code, not the run's inputs: its result depends only on the source of the rooms it covers and on the numerical
 libraries. The full main job runs it once (about a minute on this 2-core machine, in a process of its own:
 :func:`~nlosplan.stability.run_apart`), as one more job on its executor beside the references it simulates
-(:func:`run_catalog`; from this process at the end when no reference is simulated), and keeps the summary in ``$NLOSPLAN_CACHE/stability/KEY.json`` (or ``~/.cache/nlosplan/stability``), KEY the SHA-256 of
+(:func:`run_catalog`; from this process at the end when no reference is simulated), and keeps the summary in
+``$NLOSPLAN_CACHE/stability/KEY.json`` (or ``~/.cache/nlosplan/stability``), KEY the SHA-256 of
 :func:`~nlosplan.planner.design.reference_cache.code_version`, the source of the catalog and runner, and the
 versions of JAX, jaxlib and NumPy; a later run with the same key reports that summary, marked ``cached``.
 ``--no-cache`` runs it regardless. An unreadable entry is run again and replaced.

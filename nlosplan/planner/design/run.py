@@ -39,10 +39,10 @@ from nlosplan.planner.design.evaluators import evaluate
 from nlosplan.planner.design.evidence import Candidate
 from nlosplan.planner.design.executors import make_executor
 from nlosplan.planner.design.jobs import CatalogJob, ReferenceJob
-from nlosplan.planner.design.scheduling import RunTimes
 from nlosplan.planner.design.optimize import collect_candidates, optimize_choice, run_optimize
 from nlosplan.planner.design.references import real_reference_path, reference_paths, world_reference_path
 from nlosplan.planner.design.requirements import DEFAULT_REQUIREMENTS, Requirement
+from nlosplan.planner.design.scheduling import RunTimes
 from nlosplan.planner.design.search import SEED_STRIDE, DesignSearch, SearchConfig, Stage
 from nlosplan.planner.design.space import Design, DesignSpace, parse_zones
 from nlosplan.planner.design.summary import summarize
@@ -497,7 +497,7 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
         search.ingest_candidates({k: [Candidate.from_dict(c) for c in v] for k, v in saved.items()},
                                  ckpt.data.get("optimize_log") or [])
     done = len(ckpt.results)
-    times = RunTimes(ckpt.results)
+    times = RunTimes(Evaluation.from_record(r) for r in ckpt.results)
     while True:
         jobs = times.longest_first(search.suggest())
         if not jobs and search.stage is Stage.OPTIMIZE:
@@ -521,7 +521,7 @@ def _search(cfg: DesignConfig, out: Path, ckpt: _Checkpoint, executor, say,
             ev = Evaluation.from_record(result)
             search.ingest([ev])
             ckpt.add(result)
-            times.add(result)
+            times.add(ev)
             done += 1
             say(f"{search.stage}: {ev.evaluator} {ev.task} {ev.design.key()}", done, total)
     if stability is None:

@@ -28,44 +28,36 @@ def _name(v) -> str:
     return str(getattr(v, "value", v))
 
 
-def job_kind(evaluator, task, zones, n_bins: int, train_captures) -> tuple:
-    """What an evaluation's run time follows: ``(evaluator, task, "RxC", n_bins, train_captures)``."""
-    if not isinstance(zones, str):
-        zones = f"{zones[0]}x{zones[1]}"
-    return _name(evaluator), _name(task), zones, int(n_bins), None if train_captures is None else int(train_captures)
-
-
-def _of_job(job) -> tuple:
-    d = job.design
-    return job_kind(job.evaluator, job.task, d.zones, d.n_bins, (job.fidelity or {}).get("train_captures"))
-
-
-def _of_record(r: dict) -> tuple:
-    d = r["design"]
-    return job_kind(r["evaluator"], r["task"], d["zones"], d["n_bins"], (r.get("fidelity") or {}).get("train_captures"))
+def job_kind(item) -> tuple:
+    """What an evaluation's run time follows, of a job (:class:`~.jobs.DesignJob`) or its result
+    (:class:`~.evaluation.Evaluation`): ``(evaluator, task, "RxC", n_bins, train_captures)``."""
+    d = item.design
+    train = (item.fidelity or {}).get("train_captures")
+    return (_name(item.evaluator), _name(item.task), f"{d.zones[0]}x{d.zones[1]}", int(d.n_bins),
+            None if train is None else int(train))
 
 
 class RunTimes:
     """Seconds the run's evaluations took, by kind (:func:`job_kind`), and the order they imply."""
 
-    def __init__(self, records=()):
+    def __init__(self, evaluations=()):
         self._total: dict[tuple, float] = {}
         self._count: dict[tuple, int] = {}
-        for r in records:
-            self.add(r)
+        for ev in evaluations:
+            self.add(ev)
 
-    def add(self, record: dict) -> None:
-        """Learn from one result record (its ``seconds``; a record without finite seconds is skipped)."""
-        s = record.get("seconds")
-        if s is None or not math.isfinite(s) or "design" not in record:
+    def add(self, ev) -> None:
+        """Learn from one :class:`~.evaluation.Evaluation` (its ``seconds``; one without finite seconds is skipped)."""
+        s = ev.seconds
+        if s is None or not math.isfinite(s):
             return
-        k = _of_record(record)
+        k = job_kind(ev)
         self._total[k] = self._total.get(k, 0.0) + float(s)
         self._count[k] = self._count.get(k, 0) + 1
 
     def estimate(self, job) -> float:
         """Expected seconds of ``job`` (a :class:`~.jobs.DesignJob`)."""
-        k = _of_job(job)
+        k = job_kind(job)
         if k in self._count:
             return self._total[k] / self._count[k]
         rows, cols = job.design.zones
