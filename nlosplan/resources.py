@@ -15,7 +15,7 @@ from pathlib import Path
 
 from nlosplan.errors import UserError
 
-__all__ = ["MAX_DESIGN_SEED", "MAX_SEED", "MAX_TRAIN_CAPTURES",
+__all__ = ["MAX_DESIGN_SEED", "MAX_SEED", "MAX_TRAIN_CAPTURES", "WATCH_PARENT_S", "end_with_parent",
            "THREADS_ENV", "MALLOC_ENV", "available_memory", "cache_root", "check_memory", "default_threads",
            "format_bytes", "keep_freed_memory"]
 
@@ -195,3 +195,31 @@ def check_memory(needed: float, what: str, hint: str = "") -> None:
         tail = f"; {hint}" if hint else ""
         raise UserError(f"{what} needs about {format_bytes(needed)} of memory, more than the "
                         f"{format_bytes(have)} available{tail}")
+
+
+#: Seconds between a child process's checks that the process which started it is still there (:func:`end_with_parent`).
+WATCH_PARENT_S = 0.5
+
+
+def end_with_parent(parent: int | None = None) -> None:
+    """Make this process end when the process ``parent`` (default: this one's parent now) ends, also on its kill -9.
+
+    A daemon thread polls the parent every :data:`WATCH_PARENT_S` seconds and ends this process when it is gone (it
+    is then re-parented), so no design worker, nor the resource tracker workers keep open, nor the stability
+    catalog's process outlives an interrupted run. A thread, not ``PR_SET_PDEATHSIG``: that signal follows the parent
+    *thread* that started the process, and pools start workers from helper threads.
+    """
+    import threading
+    import time
+
+    parent = os.getppid() if parent is None else parent
+
+    def watch() -> None:
+        while True:
+            time.sleep(WATCH_PARENT_S)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    if os.getppid() != parent:
+        os._exit(1)
+    threading.Thread(target=watch, name="nlosplan-parent-watch", daemon=True).start()

@@ -22,6 +22,7 @@ from dataclasses import asdict
 from typing import Callable
 
 from nlosplan.cases import Case, CaseResult, run_cases
+from nlosplan.resources import end_with_parent
 from nlosplan.sensor_models.stability_cases import CASES as sensor_cases
 from nlosplan.simulators.fast.stability_cases import CASES as transport_cases
 from nlosplan.simulators.stability_cases import CASES as simulator_cases
@@ -84,30 +85,9 @@ def run_apart(cases: list[Case], progress: Callable[[CaseResult], None] | None =
     return results
 
 
-#: Seconds between the catalog's process's checks that the process which started it is still there.
-WATCH_PARENT_S = 0.5
-
-
-def _end_with_parent() -> None:
-    """End this process when the one that started it is gone (killed, or a design worker that ended): a daemon
-    thread polls the parent every :data:`WATCH_PARENT_S` seconds (a killed parent re-parents this process)."""
-    import threading
-    import time
-
-    parent = os.getppid()
-
-    def watch() -> None:
-        while True:
-            time.sleep(WATCH_PARENT_S)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="nlosplan-catalog-parent-watch", daemon=True).start()
-
-
 def _child() -> None:
     """The catalog's process (:func:`run_apart`): run the cases named in ``sys.argv[1:]``, one result line each."""
-    _end_with_parent()
+    end_with_parent()
     out = os.fdopen(os.dup(1), "w")
     os.dup2(2, 1)  # what the cases print goes to standard error; standard output carries the results only
     known = {c.name: c for c in all_cases()}

@@ -5,15 +5,10 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
-import time
 
-from nlosplan.resources import THREADS_ENV, keep_freed_memory
+from nlosplan.resources import THREADS_ENV, end_with_parent, keep_freed_memory
 
-__all__ = ["WATCH_PARENT_S", "init_worker", "hold_programs", "release_programs"]
-
-#: Seconds between a worker's checks that the process which started it is still there.
-WATCH_PARENT_S = 0.5
+__all__ = ["init_worker", "hold_programs", "release_programs"]
 
 
 #: What the compiled programs this process holds were compiled for (a zone layout, ``"catalog"``), or None.
@@ -41,27 +36,6 @@ def hold_programs(key: str) -> None:
     _held = key
 
 
-def _exit_with_parent(parent: int) -> None:
-    """Make this worker end when the process ``parent`` that started it ends (also on its kill -9).
-
-    A daemon thread polls the parent every :data:`WATCH_PARENT_S` seconds and
-    ends the process when it is gone (the worker is then re-parented), so
-    no worker, nor the multiprocessing resource tracker the workers keep
-    open, outlives an interrupted run. A thread, not ``PR_SET_PDEATHSIG``:
-    that signal follows the parent *thread* that started the process, and
-    pools start workers from helper threads.
-    """
-    def watch() -> None:
-        while True:
-            time.sleep(WATCH_PARENT_S)
-            if os.getppid() != parent:
-                os._exit(1)
-
-    if os.getppid() != parent:
-        os._exit(1)
-    threading.Thread(target=watch, name="nlosplan-parent-watch", daemon=True).start()
-
-
 def _leave() -> None:
     """A worker's last act once its pool stopped it: flush and end without the interpreter's teardown."""
     for stream in (sys.stdout, sys.stderr):
@@ -83,7 +57,7 @@ def init_worker(parent: int | None = None, quick_exit: bool = True) -> None:
     worker, which ends on its own terms) keeps the ordinary exit.
     """
     if parent is not None:
-        _exit_with_parent(parent)
+        end_with_parent(parent)
     if quick_exit:
         from multiprocessing import util
 
