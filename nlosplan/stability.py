@@ -71,11 +71,16 @@ def run_apart(cases: list[Case], progress: Callable[[CaseResult], None] | None =
         proc = subprocess.Popen([sys.executable, "-c", code, *names], stdout=subprocess.PIPE, stderr=err,
                                 env=catalog_env(), text=True)
         results = []
-        for line in proc.stdout:
-            if line.startswith(_MARK):
-                results.append(CaseResult(**json.loads(line[len(_MARK):])))
-                if progress is not None:
-                    progress(results[-1])
+        try:
+            for line in proc.stdout:
+                if line.startswith(_MARK):
+                    results.append(CaseResult(**json.loads(line[len(_MARK):])))
+                    if progress is not None:
+                        progress(results[-1])
+        except BaseException:  # interrupted here (Ctrl-C, a failing progress callback): the cases stop with it
+            proc.kill()
+            proc.wait()
+            raise
         rc = proc.wait()
         if rc != 0 or len(results) != len(names):
             err.seek(0)

@@ -51,6 +51,7 @@ def test_a_design_runs_summary_says_so_when_the_catalog_did_not_finish(tmp_path,
 
 def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path):
     """A design worker that ends (or is killed) does not leave the catalog running for a minute."""
+    import contextlib
     import os
     import signal
     import subprocess
@@ -79,10 +80,8 @@ def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path):
             os.kill(child, 0)
         except ProcessLookupError:
             break
-        try:  # reap it if it became ours (it is re-parented to init, or to a subreaper such as pytest's)
+        with contextlib.suppress(ChildProcessError):  # reap it if it became ours (re-parented to a subreaper)
             os.waitpid(child, os.WNOHANG)
-        except ChildProcessError:
-            pass
         time.sleep(0.1)
     else:
         os.kill(child, signal.SIGKILL)
@@ -99,3 +98,26 @@ def test_check_says_in_one_line_when_the_cases_process_dies(capsys, monkeypatch)
     assert main(["check"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == "nlosplan check: the stability catalog's process stopped (exit -9) after 3 of 51 cases: Killed"
+
+
+def test_an_interrupted_caller_stops_the_cases_process(monkeypatch):
+    import subprocess
+
+    started = []
+
+    class Recorded(subprocess.Popen):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            started.append(self)
+
+    monkeypatch.setattr(subprocess, "Popen", Recorded)
+    seen = []
+
+    def stop(res):
+        seen.append(res)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_apart(_cases("bins-1", "gradients-transport"), stop)  # the second case would run ~20 s
+    assert [r.name for r in seen] == ["bins-1"] and len(started) == 1
+    assert started[0].wait(timeout=5) != 0  # killed, not left to finish

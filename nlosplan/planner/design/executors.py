@@ -109,7 +109,7 @@ class PoolExecutor:
         """Replace the workers by fresh ones when one of them holds more than ``above_bytes`` of memory.
 
         After the simulation stages: what a worker compiled and cached for a reference -- 2.5-2.9 GB for the 8x8
-        one or the stability catalog -- is not carried into the evaluations. A fresh worker imports JAX, torch,
+        one -- is not carried into the evaluations. A fresh worker imports JAX, torch,
         scikit-learn and the simulators again (2-4 s of a core each), so workers that stayed small (a round of
         1x1 and 3x3 world references: 0.6-1.3 GB) are kept. Returns whether they were replaced; where a
         worker's memory cannot be read they are.

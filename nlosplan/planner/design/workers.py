@@ -3,6 +3,7 @@ compiled programs a process holds between preparation jobs."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 
@@ -39,10 +40,8 @@ def hold_programs(key: str) -> None:
 def _leave() -> None:
     """A worker's last act once its pool stopped it: flush and end without the interpreter's teardown."""
     for stream in (sys.stdout, sys.stderr):
-        try:
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # closed or replaced: nothing to flush
             stream.flush()
-        except (OSError, ValueError, AttributeError):
-            pass
     os._exit(0)
 
 
