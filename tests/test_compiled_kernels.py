@@ -169,6 +169,28 @@ def test_deposit_and_convolve_in_one_pass_equal_the_two_steps_to_the_bit():
     np.testing.assert_allclose(got, np.stack([one, -2.0 * one]), rtol=1e-12, atol=1e-12 * np.abs(one).max())
 
 
+def test_long_runs_of_touched_nodes_convolve_in_blocks_to_the_same_bits():
+    # the one-pass kernel adds four touched detection nodes at once (kernels/sum_convolve.cc, kBlock): runs of 1-9
+    # touched nodes, with zero nodes (a weight of 0) inside and whole blocks of them, must give the two steps' bits
+    rng = np.random.default_rng(5)
+    m, cells, z, n2 = 6, 90, 2, 48
+    a = rng.random((m, 30)) * (rng.random((m, 30)) < 0.8)
+    starts = rng.integers(0, n2 - 10, (m, cells))
+    p = starts + rng.random((m, cells)) * rng.integers(1, 9, (m, cells))
+    w = rng.normal(size=(m, cells)) * (rng.random((m, cells)) < 0.5)
+    w[:, ::7] = 0.0
+    zone = np.arange(cells) % z
+    rows = RowPattern(jnp.asarray(zone, jnp.int32), z)
+    for dtype in (jnp.float64, jnp.float32):
+        args = [jnp.asarray(x, dtype) for x in (a, p, w)]
+        with deposit_method("kernel"):
+            leg2 = deposit_at(args[1], args[2], rows, m * z, n2).reshape(m, z, n2)
+            want = np.asarray(sum_convolve(args[0], leg2, 80))  # the unblocked kernel
+            got = np.asarray(deposit_sum_convolve(*args, rows, n2, 80))
+        assert np.count_nonzero(want) > 100
+        np.testing.assert_array_equal(got, want)
+
+
 def test_deposit_and_convolve_derivatives_equal_the_two_steps():
     rng = np.random.default_rng(12)
     a, p, w, rows, n2 = _detection_leg(rng)
