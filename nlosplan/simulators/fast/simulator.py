@@ -19,7 +19,7 @@ from nlosplan.sensor_models.config import SensorConfig
 from nlosplan.sensor_models.noise import CaptureNoise
 from nlosplan.simulators.fast.plan import DYNAMIC_SENSOR_FIELDS, SimPlan, build_plan, pad_plan
 from nlosplan.sensor_models.transient import DEPOSIT_METHODS, default_deposit, deposit_method
-from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms
+from nlosplan.simulators.fast.transport import forward, object_nodes, scene_counts, sensor_terms, with_exact_couplings
 from nlosplan.simulators.scene import Scene
 
 _FORWARD = jax.jit(forward, static_argnums=(0, 4))
@@ -38,6 +38,7 @@ def _batched(static, arrays, scene_p, sensor_p, parts):
         return jax.lax.map(lambda sc: scene_counts(static, arrays, sc, terms, parts), scene_p)
 
     with deposit_method(static.deposit):
+        scene_p = with_exact_couplings(static, arrays, scene_p)
         return jax.lax.map(per_sensor, sensor_p)
 
 
@@ -57,6 +58,7 @@ def _batched_terms(static, arrays, scene_p, terms, parts):
     computes only the scene's objects.
     """
     with deposit_method(static.deposit):
+        scene_p = with_exact_couplings(static, arrays, scene_p)
         return jax.lax.map(lambda t: jax.lax.map(lambda sc: scene_counts(static, arrays, sc, t, parts), scene_p), terms)
 
 
@@ -67,6 +69,7 @@ def _shared_nodes(static, arrays, scene_p, terms, only):
         return jax.lax.map(lambda sc: object_nodes(static, arrays, sc, bw, t0, terms=only), scene_p)
 
     with deposit_method(static.deposit):
+        scene_p = with_exact_couplings(static, arrays, scene_p, terms=only)
         return jax.lax.map(per_sensor, terms)
 
 
@@ -78,6 +81,8 @@ def _batched_shared(static, arrays, scene_p, terms, parts, only, nodes):
                            (scene_p, n))
 
     with deposit_method(static.deposit):
+        rest = [k for k in range(len(static.objects)) if k not in only]
+        scene_p = with_exact_couplings(static, arrays, scene_p, terms=rest)
         return jax.lax.map(per_sensor, (terms, nodes))
 
 

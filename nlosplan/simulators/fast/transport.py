@@ -74,10 +74,39 @@ def _coupling(a, p, leg: str, x, n, n_near: int):
         return c, dist, None
     idx = p[f"near{leg}"]
     valid = idx < c.shape[1]
-    exact = polygon_coupling(x, n, jnp.take(a[f"k{leg}"], idx, axis=0, mode="clip"))
+    exact = p[f"exact{leg}"] if f"exact{leg}" in p else _exact_coupling(a, leg, x, n, idx)
     use = (jnp.take(dist, idx, axis=1, mode="clip") < jnp.take(a[f"thr{leg}"], idx, mode="clip")[None]) & valid
     c = c.at[:, idx].set(jnp.where(use, exact, jnp.take(c, idx, axis=1, mode="clip")), mode="drop")
     return c, dist, (idx, use, exact)
+
+
+def _exact_coupling(a, leg: str, x, n, idx):
+    """Exact polygon coupling (M, K) between samples and the near-wall block ``idx`` (K,) of a leg's cells."""
+    return polygon_coupling(x, n, jnp.take(a[f"k{leg}"], idx, axis=0, mode="clip"))
+
+
+def with_exact_couplings(static, arrays, scene_p, terms=None):
+    """A batch's scene parameters (leading axis: scenes) with every term's near-wall couplings computed beforehand.
+
+    The exact polygon coupling (:func:`_coupling`) of a near-wall block is a few hundred small elementwise
+    operations on a (samples, K) array: scene by scene (``lax.map``), each costs more to dispatch than to
+    compute. Batched over the scenes (``vmap``) they run ~3x faster (DENALI's mount and plate: 0.046 and 0.054
+    -> 0.016 and 0.013 ms a scene), and elementwise they give the same values. Added as ``"exact1"`` /
+    ``"exact2"`` (scenes, M, K) to the terms that have near blocks; :func:`_coupling` uses them.
+
+    Parameters
+    ----------
+    terms : iterable of int, optional
+        Only these object terms (indices into ``static.objects``; default all): the ones the batch computes.
+    """
+    objects = []
+    for k, (st, a, p) in enumerate(zip(static.objects, arrays["objects"], scene_p["objects"])):
+        p = dict(p)
+        for leg, n_near in (("1", st.near1), ("2", st.near2)):
+            if n_near and (terms is None or k in terms):
+                p[f"exact{leg}"] = jax.vmap(lambda q, leg=leg, a=a: _exact_coupling(a, leg, *_pose(q), q[f"near{leg}"]))(p)
+        objects.append(p)
+    return {**scene_p, "objects": objects}
 
 
 def _near_point(a, leg: str, x, near):
