@@ -81,3 +81,33 @@ def test_incompatible_batches_are_refused():
     for field, value in (("bin_width_ps", 1.05 * S3.bin_width_ps), ("start_offset_ps", S3.start_offset_ps + 50.0)):
         with pytest.raises(UserError, match=f"share their time base; {field} differs"):
             FastSimulator(denali_scene(), None, sensors=[S3, S3.replace(**{field: value})])
+
+
+def test_near_wall_couplings_computed_for_the_batch_equal_scene_by_scene(monkeypatch):
+    # DENALI's mount and plate have near-wall blocks: their exact couplings are computed for the batch's scenes at
+    # once (transport.with_exact_couplings) and must give the histograms of computing them in each scene's step
+    import nlosplan.simulators.fast.simulator as simulator
+    from nlosplan.simulators.fast import transport
+
+    scenes = [denali_scene(o, "8in", p, albedo=0.36, diffuse_albedo=0.2, mount=True, mount_in_background=False)
+              for o, p in (("A", 3), ("S", 40), ("circle", 77))]
+    sim = FastSimulator(scenes, S3, fidelity=FID, share=False)
+    static = sim.plan.static
+    near = [k for k, st in enumerate(static.objects) if st.near1 or st.near2]
+    assert near  # the supports come within a few cells of the wall
+    chunk_p, _ = sim._chunk_params()[0]
+    added = transport.with_exact_couplings(static, sim._arrays, chunk_p)
+    for k in near:
+        st, p = static.objects[k], added["objects"][k]
+        for leg, n_near in (("1", st.near1), ("2", st.near2)):
+            if n_near:
+                assert p[f"exact{leg}"].shape == (len(p["areas"]), p["areas"].shape[1], n_near)
+    batched = sim.expected(parts=True)
+    calls = []
+    monkeypatch.setattr(simulator, "with_exact_couplings",
+                        lambda static, arrays, scene_p, terms=None: calls.append(terms) or scene_p)
+    simulator._BATCHED_TERMS.clear_cache()
+    stepwise = FastSimulator(scenes, S3, fidelity=FID, share=False).expected(parts=True)
+    assert calls and np.abs(batched["object"]).max() > 0
+    for part in ("counts", "object"):
+        np.testing.assert_array_equal(batched[part], stepwise[part])
