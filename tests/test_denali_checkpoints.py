@@ -120,8 +120,10 @@ def test_evaluation_scores_every_network_and_its_batchnorm_inputs(checkpoints):
     rng = np.random.default_rng(0)
     n = 64
     x = rng.poisson(1200.0, (n, 3, 3, 128)).astype(np.float32)     # a flat floor: nothing to recognise
-    res = evaluate_checkpoints(checkpoints, x, _labels(n, rng), rows={"shape": np.arange(32)})
+    scored = []
+    res = evaluate_checkpoints(checkpoints, x, _labels(n, rng), rows={"shape": np.arange(32)}, on_done=scored.append)
     by = {r["name"]: r for r in res}
+    assert scored == [r["name"] for r in res] == [c.name for c in checkpoints]  # a progress step per network
     assert by["obj_1dcnn"]["n"] == 32 and by["size_1dcnn"]["n"] == n
     for r in res:
         ck = next(c for c in checkpoints if c.name == r["name"])

@@ -409,9 +409,11 @@ def checkpoint_check(sensor_spec, checkpoints, *, budget: str = "quick", store=N
     rows = None
     if budget == "full":
         rows = {t: denali_split(t, task_labels(labels, t))[1] for t in {c.task for c in checkpoints}}
+    step = None
     if progress is not None:
         progress.stage("running DENALI's networks", len(checkpoints), "network")
-    res = evaluate_checkpoints(checkpoints, hist, labels, rows=rows)
+        step = lambda name: progress.update(1, text=name)  # noqa: E731
+    res = evaluate_checkpoints(checkpoints, hist, labels, rows=rows, on_done=step)
     return {"checkpoints": res, "rows_scored": "the scenes of DENALI's real test split" if rows else
             "all simulated captures", "protocol": {**asdict(protocol), "captures": protocol.n_captures,
                                                    "description": protocol.describe()},

@@ -224,6 +224,8 @@ def bn_input_statistics(net: nn.Module, x: np.ndarray, batch: int = 512) -> dict
     x : ndarray, shape (N, rows, cols, bins)
         The network's inputs.
     batch : int
+    on_done : callable, optional
+        Called with each checkpoint's name once it is scored (a progress bar's step).
 
     Returns
     -------
@@ -271,7 +273,8 @@ def bn_input_statistics(net: nn.Module, x: np.ndarray, batch: int = 512) -> dict
     return out
 
 
-def evaluate_checkpoints(checkpoints, histograms, labels, *, rows: dict | None = None, batch: int = 512) -> list[dict]:
+def evaluate_checkpoints(checkpoints, histograms, labels, *, rows: dict | None = None, batch: int = 512,
+                         on_done=None) -> list[dict]:
     """Run DENALI's real-trained networks on captures and score them against their real test scores.
 
     Parameters
@@ -285,6 +288,8 @@ def evaluate_checkpoints(checkpoints, histograms, labels, *, rows: dict | None =
         Rows each task scores (e.g. the scenes of DENALI's real test split); default all.
         The MLP's z-score always uses all ``histograms`` (DENALI's z-score is over the whole set).
     batch : int
+    on_done : callable, optional
+        Called with each checkpoint's name once it is scored (a progress bar's step).
 
     Returns
     -------
@@ -332,4 +337,6 @@ def evaluate_checkpoints(checkpoints, histograms, labels, *, rows: dict | None =
         res["by_lights"] = {li: score(lights[idx] == li) for li in ("on", "off") if (lights[idx] == li).any()}
         res["bn"] = bn_input_statistics(ck.net, x, batch)
         out.append(res)
+        if on_done is not None:
+            on_done(ck.name)
     return out

@@ -217,9 +217,10 @@ def add_bench(bsub) -> None:
                                     "BatchNorm layer of the 1D CNNs the distance of its simulated input from the "
                                     "real running statistics (median |z| of the channel means, mean and rms "
                                     "log-ratio of the variances); plus their stored REAL test predictions broken "
-                                    "down by lighting, size, near/far half, quadrant and capture folder. Quick "
-                                    "budget: 36 min on a shared 2-core machine under load, 29 of them simulating "
-                                    "the 7,200 captures (cached for the next run). JSON adds "
+                                    "down by lighting, size, near/far half, quadrant and capture folder. About 20 s "
+                                    "with the quick budget (7,200 captures) and 30 s with the full one (36,000) on "
+                                    "2 idle cores, most of it simulating the captures (cached for the next run). "
+                                    "JSON adds "
                                     "\"checkpoints\": [{\"name\", \"task\", \"metric\", \"simulated\", "
                                     "\"real\", \"bn\": {\"bn1\": {\"median_abs_z\", \"mean_log_var_ratio\", "
                                     "\"rms_log_var_ratio\", ...}...}}...], \"real_breakdown\": {...}.",
