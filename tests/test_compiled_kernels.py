@@ -73,6 +73,25 @@ def test_row_patterns_equal_the_rows_written_out(method):
             np.testing.assert_allclose(batched[1], np.asarray(deposit_at(pos + 1, w, full, n_rows, n_nodes)), rtol=1e-12)
 
 
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_a_row_per_sample_taken_four_samples_at_once_keeps_each_rows_order(dtype):
+    # the kernel deposits a row per sample (RowPattern(zeros, 1)) four samples at once, position by position
+    # (deposit.cc, kInterleave): each row must take its own cells in order, exactly as cell by cell over the
+    # transposed array does (the layout the Lambertian leg 1 used), for 4k samples and a remainder
+    rng = np.random.default_rng(13)
+    for m in (8, 11, 3):
+        n, n_nodes = 37, 20
+        pos = rng.uniform(-1.5, n_nodes + 0.5, (m, n)) + rng.integers(0, 2, (m, n)) * 0.5
+        pos[0, 0] = np.nan
+        w = rng.normal(size=(m, n)) * (rng.random((m, n)) < 0.8)
+        p, wj = jnp.asarray(pos, dtype), jnp.asarray(w, dtype)
+        with deposit_method("kernel"):
+            by_sample = np.asarray(deposit_at(p, wj, RowPattern(jnp.zeros(n, jnp.int32), 1), m, n_nodes))
+            by_cell = np.asarray(deposit_at(p.T, wj.T, RowPattern(jnp.arange(m, dtype=jnp.int32), 0), m, n_nodes))
+        assert np.count_nonzero(by_sample) > m * 10
+        np.testing.assert_array_equal(by_sample, by_cell)
+
+
 def _legs(rng, m=6, z=3, n1=20, n2=12):
     """Sparse legs like a Lambertian object's: leg 1 on a span of each row, leg 2 on a few nodes per zone."""
     a = np.zeros((m, n1))
