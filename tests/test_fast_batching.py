@@ -108,6 +108,7 @@ def test_near_wall_couplings_computed_for_the_batch_equal_scene_by_scene(monkeyp
                         lambda static, arrays, scene_p, terms=None: calls.append(terms) or scene_p)
     simulator._BATCHED_TERMS.clear_cache()
     stepwise = FastSimulator(scenes, S3, fidelity=FID, share=False).expected(parts=True)
+    simulator._BATCHED_TERMS.clear_cache()  # later tests trace the batched couplings again
     assert calls and np.abs(batched["object"]).max() > 0
     for part in ("counts", "object"):
         np.testing.assert_array_equal(batched[part], stepwise[part])

@@ -224,8 +224,6 @@ def bn_input_statistics(net: nn.Module, x: np.ndarray, batch: int = 512) -> dict
     x : ndarray, shape (N, rows, cols, bins)
         The network's inputs.
     batch : int
-    on_done : callable, optional
-        Called with each checkpoint's name once it is scored (a progress bar's step).
 
     Returns
     -------

@@ -91,8 +91,9 @@ def with_exact_couplings(static, arrays, scene_p, terms=None):
     The exact polygon coupling (:func:`_coupling`) of a near-wall block is a few hundred small elementwise
     operations on a (samples, K) array: scene by scene (``lax.map``), each costs more to dispatch than to
     compute. Batched over the scenes (``vmap``) they run ~3x faster (DENALI's mount and plate: 0.046 and 0.054
-    -> 0.016 and 0.013 ms a scene), and elementwise they give the same values. Added as ``"exact1"`` /
-    ``"exact2"`` (scenes, M, K) to the terms that have near blocks; :func:`_coupling` uses them.
+    -> 0.016 and 0.013 ms a scene) and give the same values (elementwise; the bench's models and the design's
+    layouts give the same histograms to the bit, tested in ``tests/test_fast_batching.py``). Added as
+    ``"exact1"`` / ``"exact2"`` (scenes, M, K) to the terms that have near blocks; :func:`_coupling` uses them.
 
     Parameters
     ----------
@@ -104,7 +105,8 @@ def with_exact_couplings(static, arrays, scene_p, terms=None):
         p = dict(p)
         for leg, n_near in (("1", st.near1), ("2", st.near2)):
             if n_near and (terms is None or k in terms):
-                p[f"exact{leg}"] = jax.vmap(lambda q, leg=leg, a=a: _exact_coupling(a, leg, *_pose(q), q[f"near{leg}"]))(p)
+                p[f"exact{leg}"] = jax.vmap(
+                    lambda q, leg=leg, a=a: _exact_coupling(a, leg, *_pose(q), q[f"near{leg}"]))(p)
         objects.append(p)
     return {**scene_p, "objects": objects}
 
