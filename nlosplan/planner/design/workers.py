@@ -12,7 +12,7 @@ from nlosplan.resources import THREADS_ENV, end_with_parent, keep_freed_memory
 __all__ = ["init_worker", "hold_programs", "release_programs"]
 
 
-#: What the compiled programs this process holds were compiled for (a zone layout, ``"catalog"``), or None.
+#: The zone layout the compiled programs this process holds were compiled for (the catalog runs apart), or None.
 _held: str | None = None
 
 
