@@ -238,3 +238,27 @@ def test_bench_real_refuses_bad_checkpoints_before_any_work(capsys, monkeypatch,
     _one_line_error(capsys, ["bench", "real", "--parts", "checkpoints", "--checkpoints", str(CHECKPOINTS),
                              "--denali-sensor", "tmf8828-8x8-short"], "3x3 zones and 128 bins")
     _one_line_error(capsys, ["bench", "real", "--checkpoint-budget", "huge"], "huge")
+
+
+def test_bench_real_inversion_part_json_and_text(capsys, random_captures, monkeypatch):
+    if not CHECKPOINTS.is_dir():
+        pytest.skip(f"DENALI's checkpoints not found at {CHECKPOINTS}")
+    from nlosplan.tasks import denali_inversion
+
+    fit = denali_inversion.invert_mean_capture
+    monkeypatch.setattr(denali_inversion, "invert_mean_capture", lambda cks, h: fit(cks, h, iterations=2))
+    assert main(["bench", "real", "--parts", "inversion", "--checkpoints", str(CHECKPOINTS), "--json"]) == 0
+    inv = json.loads(capsys.readouterr().out)["inversion"]
+    assert np.asarray(inv["mean_real"]).shape == (9, 128) and len(inv["zones_model"]) == 9
+    assert [(r["network"], r["layer"]) for r in inv["bn_after"]][:3] == [("reg_1dcnn", "bn1"), ("reg_1dcnn", "bn2"),
+                                                                          ("reg_1dcnn", "bn3")]
+    assert len(inv["bn_before"]) == 9 and inv["loss_after"] <= inv["loss_before"] and inv["captures"] == 32
+    assert [s["name"] for s in inv["scores"]] == ["reg_1dcnn", "obj_1dcnn", "size_1dcnn"]   # the MLP has no BatchNorm
+    assert main(["bench", "real", "--parts", "inversion", "--checkpoints", str(CHECKPOINTS)]) == 0
+    text = capsys.readouterr().out
+    assert "The mean real capture behind DENALI's networks" in text and "(1, 1)" in text and "+0 bins" in text
+
+
+def test_bench_real_inversion_part_skipped_says_how(capsys):
+    assert main(["bench", "real", "--parts", "inversion", "--json"]) == 0
+    assert "--checkpoints DIR" in json.loads(capsys.readouterr().out)["inversion"]["skipped"]

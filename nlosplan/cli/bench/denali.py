@@ -200,3 +200,34 @@ def checkpoints_text(part: dict) -> str:
                      f"of a folder's captures get its most frequent class, wrong in "
                      f"{100 * b['purity']['wrong_modal_share']:.1f} % of the {b['purity']['folders']} folders")
     return "\n".join(lines)
+
+
+def inversion_text(part: dict) -> str:
+    """The ``inversion`` part of ``bench real`` for a person: the fitted mean capture against the model's."""
+    from nlosplan.reports.tables import format_table
+
+    if part.get("skipped"):
+        return f"The mean real capture behind DENALI's networks: skipped ({part['skipped']})"
+    before = {(r["network"], r["layer"]): r for r in part["bn_before"]}
+    bn_rows = [{"network": r["network"], "layer": r["layer"],
+                "median |z| before -> after": f"{before[(r['network'], r['layer'])]['median_abs_z']:.2f} -> "
+                                              f"{r['median_abs_z']:.2f}",
+                "mean log var ratio before -> after": f"{before[(r['network'], r['layer'])]['mean_log_var_ratio']:+.2f}"
+                                                      f" -> {r['mean_log_var_ratio']:+.2f}"} for r in part["bn_after"]]
+    centre_m, centre_r = part["zones_model"][4]["peak_bin"], part["zones_real"][4]["peak_bin"]
+    zone_rows = [{"zone (row, col)": f"({z // 3}, {z % 3})",
+                  "direct peak vs centre zone, model": f"{m['peak_bin'] - centre_m:+d} bins",
+                  "fitted real": f"{r['peak_bin'] - centre_r:+d} bins",
+                  "mean count, model": round(m["mean"]), "fitted real ": round(r["mean"])}
+                 for z, (m, r) in enumerate(zip(part["zones_model"], part["zones_real"]))]
+    score_rows = [{"network": c["name"], "metric": c["metric"], "on moved captures": _fmt(c["metric"], c["simulated"]),
+                   "real": _fmt(c["metric"], c["real"]), "chance": _fmt(c["metric"], c["chance"])}
+                  for c in part["scores"]]
+    return "\n".join([
+        f"The mean real capture behind DENALI's networks: fitted to their BatchNorm running statistics "
+        f"({len({r['network'] for r in part['bn_after']})} networks, {part['captures']} simulated captures' variation, "
+        f"{part['iterations']} L-BFGS steps; {part['seconds']:.0f} s):", format_table(bn_rows), "",
+        "per zone (identified: the zones' relative timing, to about 2 bins, and which are brighter; not the "
+        "absolute time, the widths or the floor's share):", format_table(zone_rows), "",
+        "the networks on the simulated captures moved to the fitted mean (x - model mean + fitted mean):",
+        format_table(score_rows)])

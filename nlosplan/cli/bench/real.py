@@ -1,6 +1,6 @@
 """``nlosplan bench real``: every real-data check, printed against the targets of issue 16.
 
-Four checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
+Five checks (``--parts``): ``plane``, real TMF882x captures of a plane at known
 distances, all zones, cross-validated by distance (``calibrate``'s all-zone
 model: each capture is predicted by the sensor file of a fit that did not see
 it); ``floor``, the same captures' floor noise against the noise model's
@@ -8,7 +8,9 @@ it); ``floor``, the same captures' floor noise against the noise model's
 simulated captures of the DENALI preset with DENALI's processing, nothing fitted;
 ``checkpoints``, DENALI's networks trained on real captures run on simulated ones
 (:func:`nlosplan.tasks.denali_bench.checkpoint_check`), with the breakdown of their
-stored real test predictions (:func:`nlosplan.tasks.denali_breakdown.real_breakdown`).
+stored real test predictions (:func:`nlosplan.tasks.denali_breakdown.real_breakdown`); ``inversion`` (opt-in),
+the mean capture fitted to those networks' BatchNorm statistics
+(:func:`nlosplan.tasks.denali_inversion.invert_mean_capture`).
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ def run_plane(path, sensor: str, folds: int, min_distance_m: float, progress=Non
             "fold_seconds": [f["seconds"] for f in cv.fold_fits], "seconds": cv.seconds}
 
 
-PARTS = ("plane", "floor", "table2", "checkpoints")
+PARTS = ("plane", "floor", "table2", "checkpoints", "inversion")
 
 
 def run_floor(path) -> dict:
@@ -87,6 +89,28 @@ def run_checkpoints(folder, sensor: str, budget: str, checkpoints=None, progress
     cks = checkpoints if checkpoints is not None else load_checkpoint_dir(folder)
     res = checkpoint_check(sensor, cks, budget=budget, progress=progress)
     return {**res, "folder": str(folder), "sensor": sensor, "budget": budget, "real_breakdown": real_breakdown(cks)}
+
+
+def run_inversion(sensor: str, checkpoints, progress=None) -> dict:
+    """The inversion part: the mean capture fitted to the 1D CNNs' BatchNorm statistics, and the networks on the
+    quick budget's simulated captures moved to it (:func:`nlosplan.tasks.denali_inversion.invert_mean_capture`)."""
+    import numpy as np
+
+    from nlosplan.tasks.denali_bench import load_protocol_captures, protocol_for
+    from nlosplan.tasks.denali_checkpoints import evaluate_checkpoints
+    from nlosplan.tasks.denali_inversion import invert_mean_capture
+
+    hist, labels, _ = load_protocol_captures(sensor, protocol_for("quick"), progress=progress)
+    if progress is not None:
+        progress.stage("fitting the mean capture to the BatchNorm statistics", 1, "fit")
+    res = invert_mean_capture(checkpoints, hist)
+    if progress is not None:
+        progress.update(1)
+    shift = (np.asarray(res["mean_real"]) - np.asarray(res["mean_model"])).reshape(3, 3, 128)
+    moved = np.asarray(hist, np.float64) + shift
+    scores = evaluate_checkpoints([c for c in checkpoints if c.model == "cnn1d"], moved.astype(np.float32), labels)
+    res["scores"] = [{k: c[k] for k in ("name", "task", "metric", "simulated", "real", "chance")} for c in scores]
+    return res
 
 
 def _check_plane(path) -> None:
@@ -153,6 +177,17 @@ def _checkpoints_part(args, cks, out: dict, texts: list) -> None:
                                    "real_breakdown": out.get("real_breakdown")}))
 
 
+def _inversion_part(args, cks, out: dict, texts: list) -> None:
+    from nlosplan.cli.bench.denali import inversion_text
+
+    if cks is None:
+        out["inversion"] = {"skipped": f"no --checkpoints given; {CHECKPOINTS_HINT}"}
+    else:
+        with progress_bar(args, None, "bench real", "step") as bar:
+            out["inversion"] = run_inversion(args.denali_sensor, cks, progress=bar)
+    texts.append(inversion_text(out["inversion"]))
+
+
 def _cmd(args) -> int:
     from nlosplan.calibration.stats_file import load_stats
     from nlosplan.reports.realism_table import format_plane_table, format_table2
@@ -162,7 +197,7 @@ def _cmd(args) -> int:
         _check_plane(args.plane)
     if "table2" in parts:
         load_stats(args.stats)   # a small file, read again by the part: its errors are one line before any work
-    cks = _check_checkpoints(args) if "checkpoints" in parts else None
+    cks = _check_checkpoints(args) if {"checkpoints", "inversion"} & set(parts) else None
     out, texts = {}, []
     if "floor" in parts:
         out["floor"] = run_floor(args.plane)
@@ -175,6 +210,8 @@ def _cmd(args) -> int:
                                          f"noisy simulated captures, DENALI's processing ({t2['seconds']:.0f} s):"))
     if "checkpoints" in parts:
         _checkpoints_part(args, cks, out, texts)
+    if "inversion" in parts:
+        _inversion_part(args, cks, out, texts)
     if "plane" not in parts:
         emit(args, out, "\n\n".join(texts))
         return 0
@@ -223,7 +260,15 @@ def add_bench(bsub) -> None:
                                     "JSON adds "
                                     "\"checkpoints\": [{\"name\", \"task\", \"metric\", \"simulated\", "
                                     "\"real\", \"bn\": {\"bn1\": {\"median_abs_z\", \"mean_log_var_ratio\", "
-                                    "\"rms_log_var_ratio\", ...}...}}...], \"real_breakdown\": {...}.",
+                                    "\"rms_log_var_ratio\", ...}...}}...], \"real_breakdown\": {...}. "
+                                    "Inversion (--parts inversion, with --checkpoints; not in the default parts: "
+                                    "about 3-4 min on 2 cores): the mean capture (9 zones x 128 bins) that brings "
+                                    "the three 1D CNNs' BatchNorm inputs to their real running statistics, with "
+                                    "the simulated captures' own variation kept (400 of the quick budget's), its "
+                                    "zones' relative timing and levels beside the model's, and the networks on "
+                                    "the simulated captures moved to it. JSON adds \"inversion\": {\"mean_real\", "
+                                    "\"mean_model\", \"zones_real\", \"zones_model\", \"bn_before\", \"bn_after\", "
+                                    "\"scores\", ...}.",
                         epilog=f"examples:\n  {EXAMPLE}\n  {EXAMPLE_CHECKPOINTS}",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--plane", default=DEFAULT_PLANE, help="plane and floor: plane captures JSON (default: %(default)s)")
@@ -231,7 +276,7 @@ def add_bench(bsub) -> None:
     p.add_argument("--folds", type=int_type(2, 100), default=5, help="folds by distance (default: %(default)s)")
     p.add_argument("--min-distance", type=number_type(float, zero_ok=True), default=0.06, help="nearest capture scored, m (default: 0.06)")
     p.add_argument("--parts", default="plane,floor,table2,checkpoints",
-                   help="checks to run, from plane, floor, table2, checkpoints (default: %(default)s)")
+                   help="checks to run, from plane, floor, table2, checkpoints, inversion (default: %(default)s)")
     p.add_argument("--stats", default="denali-table2",
                    help="table2: statistics file (default: %(default)s, the shipped DENALI Table 2)")
     p.add_argument("--denali-sensor", default="denali-tmf8828-3x3",
