@@ -47,6 +47,7 @@ def test_zone_summary_reads_peak_width_and_floors():
     assert s[4]["fwhm_bins"] == pytest.approx(2.3548 * 3.0, abs=0.25)
     assert s[0]["floor_before"] == pytest.approx(300.0) and s[8]["floor_after"] == pytest.approx(1000.0)
     assert s[4]["mean"] == pytest.approx(m[4].mean())
+    assert zone_summary(_mean(5.0, 1.0, 1000.0, 10.0))[0]["floor_before"] is None   # no bins before: none, not NaN
     with pytest.raises(UserError, match="at least 16 bins"):
         zone_summary(np.ones((9, 8)))
 

@@ -247,8 +247,8 @@ def emit(args, data, text: str) -> None:
 
 EXAMPLES = {
     "design": (
-        "nlosplan design                                   # the main job: DENALI preset, ~15 min on 2 cores",
-        "nlosplan design --quick --json                    # reduced space, ~2 min",
+        "nlosplan design                                   # the main job: DENALI preset, ~5 min on 2 cores",
+        "nlosplan design --quick --json                    # reduced space, ~1 min",
         "nlosplan design --requirement 'loc<=0.03' --requirement 'size>=0.95@size=4in' --out out/d --resume",
         "nlosplan design --quick --out out/d --overwrite        # start over where out/d holds a previous run",
         "nlosplan design --config my_space.toml --cluster local:4",

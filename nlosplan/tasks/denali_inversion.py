@@ -49,7 +49,7 @@ def zone_summary(mean: np.ndarray) -> list[dict]:
     list of dict
         Per zone: ``zone``, ``peak_bin`` (argmax), ``peak`` (counts), ``fwhm_bins`` (width at half the peak's
         height above the floor after it, linearly interpolated), ``floor_before`` (median of the bins more than
-        10 before the peak, counts per bin; NaN if none), ``floor_after`` (median of the bins from 30 after the
+        10 before the peak, counts per bin; None if none), ``floor_after`` (median of the bins from 30 after the
         peak to the end, else of the last 10 bins), ``mean`` (counts per bin over the window).
     """
     m = np.asarray(mean, dtype=np.float64)
@@ -71,7 +71,7 @@ def zone_summary(mean: np.ndarray) -> list[dict]:
         left = lo - 1 + (half - h[lo - 1]) / (h[lo] - h[lo - 1]) if lo > 0 else float(lo)
         right = hi + (h[hi] - half) / (h[hi] - h[hi + 1]) if hi < len(h) - 1 else float(hi)
         out.append({"zone": z, "peak_bin": p, "peak": float(h[p]), "fwhm_bins": float(right - left),
-                    "floor_before": float(np.median(before)) if len(before) else float("nan"),
+                    "floor_before": float(np.median(before)) if len(before) else None,
                     "floor_after": floor_after, "mean": float(h.mean())})
     return out
 
