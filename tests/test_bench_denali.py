@@ -145,7 +145,7 @@ def test_full_budget_on_the_cpu_warns_how_long_before_any_work(capsys, monkeypat
         main(["bench", "denali", "--device", "cpu", "--budget", "full", "--models", "cnn1d", "--tasks", "size"])
     err = capsys.readouterr().err
     assert "warning: bench denali: 36,000 captures" in err and "of training on this machine now" in err
-    assert "about an hour each on 2 idle cores" in err and "--budget quick" in err
+    assert "8-14 min each on 2 idle cores" in err and "--budget quick" in err
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """k nearest neighbours under DENALI's protocol: a training-free cell beside DENALI's recipe in ``bench denali``.
 
-DENALI's recipe needs about an hour per 1D CNN cell at full budget on 2 CPU cores; the k-nearest-neighbour learner
+DENALI's recipe needs 8-14 min per 1D CNN cell at full budget on 2 idle CPU cores; the k-nearest-neighbour learner
 of the design planner (:mod:`nlosplan.tasks.neighbours`: principal components of square-root counts, their number
 and k chosen on a seeded 15 % of the training captures) takes about a minute on DENALI's 25,200 training captures. :func:`knn_cell` runs it on DENALI's
 exact split (:func:`~nlosplan.tasks.denali_protocol.denali_split`) and returns the same

@@ -32,8 +32,9 @@ set); last epoch = the recipe's last epoch (test-blind); validation-chosen = a s
 training rows minus a seeded tenth, its epoch chosen on that tenth, scored on the test set (test-blind;
 90 % of the training rows; --no-validation skips it and halves the time); real = DENALI's Table 1.
 
-Budgets: full = DENALI's protocol (about two minutes per 1D CNN cell on a datacenter GPU, about an hour on 2
-CPU cores, twice that with the validation run: a warning with the estimate for this machine comes first);
+Budgets: full = DENALI's protocol (about two minutes per 1D CNN cell on a datacenter GPU; on 2 idle CPU cores
+8-14 min per 1D CNN cell, 60-100 epochs, twice that with the validation run: a warning with the estimate for this
+machine comes first);
 quick = every fifth position (7,200 captures) and a fifth of DENALI's epochs: not DENALI's numbers, a look
 at the trend in minutes, and the output says so. Default: full on a GPU, quick on the CPU. --objects,
 --positions and --epochs narrow the protocol further (budget "custom").
@@ -113,8 +114,8 @@ def _cmd(args) -> int:
         line = (f"bench denali: {protocol.describe()} on the CPU: about {took} of training on this machine now "
                 "(timed on a few batches), plus the captures' simulation the first time")
         if protocol.budget == "full" and set(args.models) - {"knn"}:
-            warn(line + "; DENALI's 1D CNN cells take about an hour each on 2 idle cores and minutes on a GPU "
-                        "(--device cuda); --budget quick for a first look")
+            warn(line + "; DENALI's 1D CNN cells take 8-14 min each on 2 idle cores (more on a loaded machine) "
+                        "and minutes on a GPU (--device cuda); --budget quick for a first look")
         else:
             note(args, line)
     with progress_bar(args, None, "bench denali", "step") as bar:
