@@ -38,6 +38,8 @@ CATALOG_XLA_FLAGS = ("--xla_backend_optimization_level=0", "--xla_cpu_use_fusion
 
 #: What the catalog's process writes before each result line (anything else it prints goes to standard error).
 _MARK = "nlosplan-case "
+#: Environment variable carrying the pid of the process that starts the catalog's (:func:`catalog_env`).
+PARENT_ENV = "NLOSPLAN_CATALOG_PARENT"
 
 
 def all_cases() -> list[Case]:
@@ -47,9 +49,12 @@ def all_cases() -> list[Case]:
 
 def catalog_env(environ=None) -> dict:
     """The environment of the catalog's process: ``environ`` (default: this one's) with
-    :data:`CATALOG_XLA_FLAGS` after any ``XLA_FLAGS`` already set (the later of two equal options counts)."""
+    :data:`CATALOG_XLA_FLAGS` after any ``XLA_FLAGS`` already set (the later of two equal options counts), and this
+    process's pid in :data:`PARENT_ENV`, so the catalog's process ends with it even when it dies before the
+    catalog's imports are done (the process would be re-parented by then and could not tell its parent was gone)."""
     env = dict(os.environ if environ is None else environ)
     env["XLA_FLAGS"] = " ".join(filter(None, (env.get("XLA_FLAGS", "").strip(), *CATALOG_XLA_FLAGS)))
+    env[PARENT_ENV] = str(os.getpid())
     return env
 
 
@@ -92,7 +97,7 @@ def run_apart(cases: list[Case], progress: Callable[[CaseResult], None] | None =
 
 def _child() -> None:
     """The catalog's process (:func:`run_apart`): run the cases named in ``sys.argv[1:]``, one result line each."""
-    end_with_parent()
+    end_with_parent(int(os.environ.get(PARENT_ENV, os.getppid())))
     out = os.fdopen(os.dup(1), "w")
     os.dup2(2, 1)  # what the cases print goes to standard error; standard output carries the results only
     known = {c.name: c for c in all_cases()}

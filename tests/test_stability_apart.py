@@ -1,9 +1,11 @@
 """The stability catalog runs in a process of its own whose XLA compiles cheaply (nlosplan.stability.run_apart)."""
 
+import os
+
 import pytest
 
 from nlosplan.planner.design import catalog
-from nlosplan.stability import CATALOG_XLA_FLAGS, all_cases, catalog_env, run_apart, run_cases
+from nlosplan.stability import CATALOG_XLA_FLAGS, PARENT_ENV, all_cases, catalog_env, run_apart, run_cases
 
 
 def _cases(*names):
@@ -27,6 +29,7 @@ def test_the_catalogs_xla_options_come_after_the_users():
     assert env["XLA_FLAGS"].split() == ["--xla_force_host_platform_device_count=2", *CATALOG_XLA_FLAGS]
     assert env["HOME"] == "/h"
     assert catalog_env({})["XLA_FLAGS"].split() == list(CATALOG_XLA_FLAGS)
+    assert catalog_env({})[PARENT_ENV] == str(os.getpid())   # the child checks this pid, not its parent at import
 
 
 def test_a_process_that_stops_early_is_an_error_naming_its_last_words():
@@ -49,8 +52,10 @@ def test_a_design_runs_summary_says_so_when_the_catalog_did_not_finish(tmp_path,
     assert not (tmp_path / "stability").exists()  # nothing kept: the next run tries again
 
 
-def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path):
-    """A design worker that ends (or is killed) does not leave the catalog running for a minute."""
+@pytest.mark.parametrize("after_s", [0.0, 1.0], ids=["during-its-imports", "while-it-computes"])
+def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path, after_s):
+    """A design worker that ends (or is killed) does not leave the catalog running for a minute, also when it dies
+    before the catalog's process has imported anything (it is re-parented before it can watch)."""
     import contextlib
     import os
     import signal
@@ -71,7 +76,7 @@ def test_the_catalogs_process_ends_with_the_process_that_started_it(tmp_path):
     while not (pidfile.exists() and pidfile.read_text()) and time.monotonic() < deadline:
         time.sleep(0.1)
     child = int(pidfile.read_text())
-    time.sleep(1.0)  # the child is importing or compiling the case that takes ~20 s
+    time.sleep(after_s)  # 0: the child is still importing; 1: importing or compiling the case that takes ~20 s
     os.kill(parent.pid, signal.SIGKILL)
     parent.wait()
     deadline = time.monotonic() + 10
