@@ -53,7 +53,8 @@ def test_zone_summary_reads_peak_width_and_floors():
 
 
 @pytest.mark.slow   # three real networks, 60 L-BFGS steps: ~1-2 min on 2 cores
-@pytest.mark.skipif(not CKPT.is_file(), reason="DENALI's checkpoints not in ../shared/data")
+@pytest.mark.skipif(not CKPT.is_file(), reason="needs DENALI's real-trained checkpoints, test data beside the checkout "
+                    "(../shared/data/denali/checkpoints); the package never ships them")
 def test_inversion_recovers_what_it_can_of_a_known_mean_capture_through_the_real_networks():
     """Statistics set from captures with a known mean (columns 4 bins apart, widest on the left), the fit started
     from another (every zone at bin 50, narrow): it recovers the zones' relative timing (to about 2 bins) and

@@ -90,14 +90,24 @@ def _cnns(checkpoints) -> list:
 
 
 def _bn_terms(nets, x: torch.Tensor, detail: bool = False):
-    """Sum over networks and layers of mean z**2 + mean log-variance-ratio**2 (and per-layer distances)."""
+    """Sum over networks and layers of mean z**2 + mean log-variance-ratio**2 (and per-layer distances).
+
+    Each network runs its own ``features`` on ``x`` (shape (n, 9, 128)); a hook on every BatchNorm1d takes its input
+    (differentiably) and compares its moments over batch and time with the layer's running statistics.
+    """
     total = x.new_zeros(())
     rows = []
     for name, net in nets:
-        h = x
-        layers = (("bn1", net.conv1, net.bn1), ("bn2", net.conv2, net.bn2), ("bn3", net.conv3, net.bn3))
-        for layer, conv, bn in layers:
-            v = conv(h)
+        inputs = {}
+        layers = {n: m for n, m in net.named_modules() if isinstance(m, nn.BatchNorm1d)}
+        hooks = [m.register_forward_pre_hook(lambda _m, a, n=n: inputs.__setitem__(n, a[0])) for n, m in layers.items()]
+        try:
+            net.features(x.reshape(len(x), 3, 3, -1))
+        finally:
+            for h in hooks:
+                h.remove()
+        for layer, bn in layers.items():
+            v = inputs[layer]
             mu, var = v.mean(dim=(0, 2)), v.var(dim=(0, 2), unbiased=False)
             z = (mu - bn.running_mean) / bn.running_var.sqrt()
             lr = torch.log(var.clamp_min(1e-30) / bn.running_var)
@@ -105,7 +115,6 @@ def _bn_terms(nets, x: torch.Tensor, detail: bool = False):
             if detail:
                 rows.append({"network": name, "layer": layer, "median_abs_z": float(z.abs().median()),
                              "mean_log_var_ratio": float(lr.mean())})
-            h = nn.functional.gelu(bn(v))
     return (total, rows) if detail else total
 
 

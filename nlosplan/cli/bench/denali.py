@@ -217,9 +217,9 @@ def inversion_text(part: dict) -> str:
                                                       f" -> {r['mean_log_var_ratio']:+.2f}"} for r in part["bn_after"]]
     centre_m, centre_r = part["zones_model"][4]["peak_bin"], part["zones_real"][4]["peak_bin"]
     zone_rows = [{"zone (row, col)": f"({z // 3}, {z % 3})",
-                  "direct peak vs centre zone, model": f"{m['peak_bin'] - centre_m:+d} bins",
-                  "fitted real": f"{r['peak_bin'] - centre_r:+d} bins",
-                  "mean count, model": round(m["mean"]), "fitted real ": round(r["mean"])}
+                  "direct peak vs centre, model": f"{m['peak_bin'] - centre_m:+d} bins",
+                  "direct peak vs centre, fitted real": f"{r['peak_bin'] - centre_r:+d} bins",
+                  "mean count, model": round(m["mean"]), "mean count, fitted real": round(r["mean"])}
                  for z, (m, r) in enumerate(zip(part["zones_model"], part["zones_real"]))]
     score_rows = [{"network": c["name"], "metric": c["metric"], "on moved captures": _fmt(c["metric"], c["simulated"]),
                    "real": _fmt(c["metric"], c["real"]), "chance": _fmt(c["metric"], c["chance"])}
