@@ -43,6 +43,10 @@ def test_bad_input_is_one_line_and_exit_2_before_any_work(capsys, monkeypatch, t
     _one_line_error(capsys, ["bench", "denali", "--tasks", "colour"], "colour")
     _one_line_error(capsys, ["bench", "denali", "--positions", "0-100"], "0-100")
     _one_line_error(capsys, ["bench", "denali", "--epochs", "0"], "--epochs")
+    _one_line_error(capsys, ["bench", "denali", "--seeds", "42,42"], "--seeds", "42 given twice")
+    _one_line_error(capsys, ["bench", "denali", "--seeds", "4x"], "--seeds", "4x")
+    _one_line_error(capsys, ["bench", "denali", "--seeds", "-1"], "--seeds")
+    _one_line_error(capsys, ["bench", "denali", "--seeds", ","], "--seeds", "no seed given")
     (tmp_path / "adir").mkdir()
     _one_line_error(capsys, ["bench", "denali", "--store", str(tmp_path / "adir")], "--store")
 
@@ -129,6 +133,45 @@ def test_bench_denali_knn_cell_on_denalis_split(capsys, synthetic_captures):
     assert main(argv[:-1]) == 0
     text = capsys.readouterr().out
     assert "knn: k nearest neighbours on principal components of square-root counts" in text and "Table 1 has no such learner" in text
+
+
+def test_bench_denali_seeds_train_each_cell_per_seed_and_say_the_spread(capsys, synthetic_captures):
+    from nlosplan.tasks.denali_bench import check_seeds, seed_spread
+
+    argv = ["bench", "denali", "--device", "cpu", "--objects", "1,7,A,S", "--positions", "0-8", "--epochs", "3",
+            "--models", "cnn1d,knn", "--tasks", "loc", "--no-validation", "--seeds", "5,6,7", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["seeds"] == [5, 6, 7]
+    cnn = [r for r in out["rows"] if r["model"] == "cnn1d"]
+    assert [r["seed"] for r in cnn] == [5, 6, 7] and [r["seed"] for r in out["rows"] if r["model"] == "knn"] == [None]
+    assert len({r["predicted"] for r in cnn}) == 3       # each seed its own draw of the recipe
+    assert [c["seed"] for c in out["cells"] if c["model"] == "cnn1d"] == [5, 6, 7]
+    (g,) = out["spread"]                                 # knn has no training seed: no spread row
+    v = np.array([r["predicted"] for r in cnn])
+    assert g["task"] == "loc" and g["model"] == "cnn1d" and g["seeds"] == [5, 6, 7] and g["real"] == 0.0456
+    assert g["mean"] == pytest.approx(v.mean()) and g["sd"] == pytest.approx(v.std(ddof=1))
+    assert (g["min"], g["max"]) == (v.min(), v.max()) and g["real_in_range"] == bool(v.min() <= 0.0456 <= v.max())
+    # the same seed gives the same figure: a seed is a draw, not noise of the machine
+    argv[argv.index("5,6,7")] = "6"
+    assert main(argv) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert one["spread"] == [] and [r["predicted"] for r in one["rows"] if r["model"] == "cnn1d"] == [cnn[1]["predicted"]]
+    argv[argv.index("6")] = "5,6"
+    argv.remove("--json")
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "Over the training seeds" in text and "real between" in text and " seed" in text.splitlines()[3]
+    # the rows' real figure lies between the seeds' exactly when real_in_range says so
+    rows = [{"task": "size", "model": "cnn1d", "metric": "top1_acc", "predicted": p, "predicted_last_epoch": 0.5,
+             "real": 0.9468, "seed": s} for s, p in ((1, 0.93), (2, 0.95))]
+    (g,) = seed_spread(rows)
+    assert g["real_in_range"] is True and g["sd"] == pytest.approx(0.01 * 2 ** 0.5)
+    assert seed_spread(rows[:1]) == [] and seed_spread(rows[:1] + [{**rows[1], "predicted": 0.94}])[0]["real_in_range"] is False
+    with pytest.raises(Exception, match="distinct"):
+        check_seeds([1, 1])
+    with pytest.raises(Exception, match="integer"):
+        check_seeds([1.5])
 
 
 def test_full_budget_on_the_cpu_warns_how_long_before_any_work(capsys, monkeypatch):

@@ -121,6 +121,23 @@ def seed_type():
     return int_type(0, MAX_SEED)
 
 
+def seed_list_type(max_count: int):
+    """An argparse type: distinct seeds (each as :func:`seed_type`), comma-separated, at most ``max_count``."""
+    one = seed_type()
+
+    def parse(text: str) -> list[int]:
+        seeds = [one(v.strip()) for v in text.split(",") if v.strip()]
+        if not seeds:
+            raise argparse.ArgumentTypeError("no seed given; e.g. 42,43,44")
+        if len(set(seeds)) != len(seeds):
+            raise argparse.ArgumentTypeError(f"seed {next(s for s in seeds if seeds.count(s) > 1)} given twice")
+        if len(seeds) > max_count:
+            raise argparse.ArgumentTypeError(f"{len(seeds)} seeds; at most {max_count}")
+        return seeds
+
+    return parse
+
+
 def zones_type(text: str) -> tuple[int, int]:
     """An argparse type: a zone grid ``RxC`` (e.g. 3x3 or 8x8), 1 to 16 per axis."""
     from nlosplan.sensor_models.config import MAX_ZONES_PER_AXIS

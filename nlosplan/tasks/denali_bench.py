@@ -13,8 +13,8 @@ Budgets
 -------
 ``full``
     DENALI's protocol: 30 objects x 2 sizes x 100 positions x lights on and off x 3 repeats = 36,000
-    captures, DENALI's epochs (60-100). About two minutes per 1D CNN cell on a datacenter GPU, about an
-    hour on 2 CPU cores.
+    captures, DENALI's epochs (60-100). About two minutes per 1D CNN cell on a datacenter GPU, 8-14 min on 2
+    idle CPU cores (measured 2026-11-29).
 ``quick``
     Every fifth gantry position (0, 5, ..., 95: 20 positions spread over the grid) = 7,200 captures, a
     fifth of DENALI's epochs (12 for localization, 20 for shape and size, 15 for the size MLP); DENALI's
@@ -22,7 +22,9 @@ Budgets
 
 With ``validation`` (default on) each cell is trained a second time on its training rows minus a seeded
 tenth to give an epoch chosen without the test set (:mod:`nlosplan.tasks.denali_recipe`); it doubles the
-training time.
+training time. With several ``seeds`` every recipe cell is trained once per seed of torch's generator (DENALI's
+split stays its seed 42's): the spread of DENALI's figure over the draws of its own recipe, which one run cannot
+show (:func:`seed_spread`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import numpy as np
 
 from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES
 from nlosplan.errors import UserError
+from nlosplan.tasks.denali_protocol import SEED
 
 __all__ = ["BUDGETS", "BUILD_SEED", "QUICK_EPOCH_FRACTION", "QUICK_POSITION_STEP", "Protocol", "checkpoint_check",
            "default_store", "estimate_seconds", "load_protocol_captures", "protocol_for", "run_denali_bench"]
@@ -211,8 +214,11 @@ def load_protocol_captures(sensor_spec, protocol: Protocol, *, store=None, fidel
     return ds.histograms[order], ds.labels.iloc[order].reset_index(drop=True), info
 
 
-def estimate_seconds(models, tasks, protocol: Protocol, device: str, *, validation: bool, shape=(3, 3, 128)) -> float:
+def estimate_seconds(models, tasks, protocol: Protocol, device: str, *, validation: bool, shape=(3, 3, 128),
+                     n_seeds: int = 1) -> float:
     """Training time of the cells, from three timed training batches of each model on ``device`` now.
+
+    ``n_seeds`` recipe runs per cell (:func:`run_denali_bench`'s ``seeds``); knn runs once.
 
     A rough figure for the warning before long work: evaluation passes count a third of a training pass.
     """
@@ -244,7 +250,7 @@ def estimate_seconds(models, tasks, protocol: Protocol, device: str, *, validati
     for model in models:
         for task in tasks:
             epochs = protocol.cell_epochs(cell_settings(model, task)["epochs"])
-            runs = 2 if validation else 1
+            runs = (2 if validation else 1) * n_seeds
             total += runs * epochs * per_sample[model] * (n_train + protocol.n_captures * 0.3 / 3)
     return total
 
@@ -280,9 +286,55 @@ def _row(res, real: float | None, val_res, protocol: Protocol, labels) -> dict:
             else val_res.n_train, "predicted_by_lights": by_lights}
 
 
+def check_seeds(seeds) -> tuple[int, ...]:
+    """``seeds`` as distinct non-negative ints (torch's generator takes any below 2**63); UserError otherwise."""
+    out = []
+    for v in seeds:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) < 2 ** 63:
+            raise UserError(f"seed {v!r} is not an integer from 0 to 2**63-1")
+        out.append(int(v))
+    if not out or len(set(out)) != len(out):
+        raise UserError(f"seeds {', '.join(map(str, out)) or '(none)'}: give one or more distinct seeds")
+    return tuple(out)
+
+
+def seed_spread(rows) -> list[dict]:
+    """How DENALI's figure of each recipe cell spreads over the training seeds of one run.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        :func:`run_denali_bench`'s rows (knn's, with no seed, are left out).
+
+    Returns
+    -------
+    list of dict
+        Per task and model trained at two seeds or more: ``task``, ``model``, ``metric``, ``seeds``,
+        ``predicted`` (best on test per seed, the metric's unit: metres or a fraction), ``mean``, ``sd`` (sample
+        standard deviation over the seeds), ``min``, ``max``, ``predicted_last_epoch`` (per seed), ``real``
+        (Table 1) and ``real_in_range`` (whether the real figure lies between the lowest and highest seed's).
+    """
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in rows:
+        if r.get("seed") is not None:
+            groups.setdefault((r["task"], r["model"]), []).append(r)
+    out = []
+    for (task, model), rs in groups.items():
+        if len(rs) < 2:
+            continue
+        v = np.array([r["predicted"] for r in rs], dtype=np.float64)
+        real = rs[0]["real"]
+        out.append({"task": task, "model": model, "metric": rs[0]["metric"], "seeds": [r["seed"] for r in rs],
+                    "predicted": v.tolist(), "mean": float(v.mean()), "sd": float(v.std(ddof=1)),
+                    "min": float(v.min()), "max": float(v.max()),
+                    "predicted_last_epoch": [r["predicted_last_epoch"] for r in rs], "real": real,
+                    "real_in_range": None if real is None else bool(v.min() <= real <= v.max())})
+    return out
+
+
 def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "mlp"), tasks=("loc", "shape", "size"),
                      device: str = "cpu", validation: bool = True, store=None, objects=None, positions=None,
-                     epochs: int | None = None, progress=None) -> dict:
+                     epochs: int | None = None, seeds=(SEED,), progress=None) -> dict:
     """DENALI's protocol on simulated captures of a sensor, each cell with DENALI's recipe, beside Table 1.
 
     Parameters
@@ -303,6 +355,9 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
         Capture store (default: the content-keyed cache file).
     objects, positions, epochs : optional
         Narrow the protocol by hand (``budget`` becomes ``"custom"``).
+    seeds : sequence of int
+        Seeds of torch's generator (weights, batch order, dropout); each recipe cell is trained once per seed.
+        Default DENALI's 42 alone. The split is DENALI's whatever the seeds; knn has no training seed and runs once.
     progress : nlosplan.progress.Progress, optional
 
     Returns
@@ -311,7 +366,8 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
         ``rows`` (one per task and model: ``task``, ``model``, ``metric``, ``predicted`` (best-on-test, as
         DENALI), ``predicted_last_epoch``, ``predicted_validation_epoch``, ``real`` (Table 1), ``budget``,
         ``device``, ``seconds``, ``best_epoch``, ``epochs``, ``validation_epoch``, ``n_train``, ``n_test``,
-        ``predicted_by_lights``), ``cells`` (every run's :meth:`CellResult.to_dict`), ``protocol``,
+        ``predicted_by_lights``, ``seed``: the training seed, None for knn), ``spread`` (with two seeds or more:
+        :func:`seed_spread`), ``seeds``, ``cells`` (every run's :meth:`CellResult.to_dict`), ``protocol``,
         ``captures`` (where they came from), ``real_source``, ``device``, ``seconds``, ``torch_threads``.
     """
     import torch
@@ -324,6 +380,7 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
     from nlosplan.tasks.denali_knn import KNN, knn_cell
 
     models = check_names("model(s)", models, RECIPE_MODELS + (KNN,))
+    seeds = check_seeds(seeds)
     tasks = check_names("task(s)", tasks, TASKS)
     dev = resolve_device(device)
     protocol = protocol_for(budget, objects=objects, positions=positions, epochs=epochs)
@@ -341,29 +398,31 @@ def run_denali_bench(sensor_spec, *, budget: str = "quick", models=("cnn1d", "ml
                 res = knn_cell(hist, targets, task)
                 if progress is not None:
                     progress.set(1, 1, f"k {res.settings['k']}, {res.settings['components']} components")
-                rows.append(_row(res, None, res, protocol, labels))   # its figure is test-blind already
+                rows.append({**_row(res, None, res, protocol, labels), "seed": None})   # test-blind already
                 cells.append(res.to_dict())
                 continue
             n_ep = protocol.cell_epochs(cell_settings(model, task)["epochs"])
-            runs = [False, True] if validation else [False]
-            results = []
-            for val in runs:
-                if progress is not None:
-                    progress.set_postfix_str("", refresh=False)
-                    progress.stage(f"{model} {task}{' (validation run)' if val else ''}", n_ep, "epoch")
-                    progress.set(0, n_ep)
+            for seed in seeds:
+                results = []
+                for val in ([False, True] if validation else [False]):
+                    if progress is not None:
+                        progress.set_postfix_str("", refresh=False)
+                        progress.stage(f"{model} {task}{' (validation run)' if val else ''}"
+                                       f"{f' seed {seed}' if len(seeds) > 1 else ''}", n_ep, "epoch")
+                        progress.set(0, n_ep)
 
-                def said(rec, p=progress, key="loc_rmse" if task == "loc" else "top1_acc"):
-                    if p is not None:
-                        p.set(rec["epoch"], rec["epochs"], f"test {key} {rec['test'][key]:.4g}")
+                    def said(rec, p=progress, key="loc_rmse" if task == "loc" else "top1_acc"):
+                        if p is not None:
+                            p.set(rec["epoch"], rec["epochs"], f"test {key} {rec['test'][key]:.4g}")
 
-                results.append(train_denali_cell(hist, targets, task, model, epochs=n_ep, device=dev,
-                                                 validation=val, progress=said))
-            main_res, val_res = results[0], (results[1] if validation else None)
-            ref = real["values"].get(task, {}).get(model, {}).get(main_res.metric)
-            rows.append(_row(main_res, ref, val_res, protocol, labels))
-            cells += [r.to_dict() for r in results]
-    return {"rows": rows, "cells": cells, "protocol": {**asdict(protocol), "captures": protocol.n_captures,
+                    results.append(train_denali_cell(hist, targets, task, model, epochs=n_ep, device=dev,
+                                                     validation=val, seed=seed, progress=said))
+                main_res, val_res = results[0], (results[1] if validation else None)
+                ref = real["values"].get(task, {}).get(model, {}).get(main_res.metric)
+                rows.append({**_row(main_res, ref, val_res, protocol, labels), "seed": int(seed)})
+                cells += [r.to_dict() for r in results]
+    return {"rows": rows, "spread": seed_spread(rows) if len(seeds) > 1 else [], "seeds": [int(v) for v in seeds],
+            "cells": cells, "protocol": {**asdict(protocol), "captures": protocol.n_captures,
                                                         "description": protocol.describe()},
             "captures": captures, "real_source": real["source"], "device": dev, "validation": bool(validation),
             "seconds": time.perf_counter() - t0, "torch_threads": torch.get_num_threads(),

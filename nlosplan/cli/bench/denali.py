@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nlosplan.cli.common import emit, int_type, names_type, note, progress_bar, warn
+from nlosplan.cli.common import emit, int_type, names_type, note, progress_bar, seed_list_type, warn
 
 EXAMPLES = (
     "nlosplan bench denali                              # quick budget on the CPU, full on a GPU",
@@ -12,6 +12,8 @@ EXAMPLES = (
     "nlosplan bench denali --sensor tmf8828-3x3-short --models cnn1d --tasks loc,size --no-validation",
     "nlosplan bench denali --budget full --models knn        # DENALI's protocol, training-free, minutes on a CPU",
     "nlosplan bench denali --objects A,S,circle --positions 0-19 --epochs 5   # a small custom run",
+    "nlosplan bench denali --budget full --models cnn1d --tasks loc --no-validation --seeds 42,43,44"
+    "   # the recipe's own spread",
 )
 
 DESCRIPTION = """\
@@ -32,6 +34,11 @@ set); last epoch = the recipe's last epoch (test-blind); validation-chosen = a s
 training rows minus a seeded tenth, its epoch chosen on that tenth, scored on the test set (test-blind;
 90 % of the training rows; --no-validation skips it and halves the time); real = DENALI's Table 1.
 
+Seeds: DENALI trains each cell once, with torch seeded at 42; its figure is one draw of the recipe. --seeds
+42,43,44 trains every cell once per seed (the split stays DENALI's) and prints each seed's row and the spread
+(mean, standard deviation, lowest and highest, whether the real figure lies between): how far one run's figure
+can be trusted, before comparing it with Table 1. Time grows with the number of seeds.
+
 Budgets: full = DENALI's protocol (about two minutes per 1D CNN cell on a datacenter GPU; on 2 idle CPU cores
 8-14 min per 1D CNN cell, 60-100 epochs, twice that with the validation run: a warning with the estimate for this
 machine comes first);
@@ -41,8 +48,10 @@ at the trend in minutes, and the output says so. Default: full on a GPU, quick o
 
 JSON: {"rows": [{"task", "model", "metric", "predicted", "predicted_last_epoch",
 "predicted_validation_epoch", "real", "budget", "device", "seconds", "best_epoch", "epochs",
-"validation_epoch", "n_train", "n_test", "predicted_by_lights"}...], "cells": [per-run settings and
-per-epoch history...], "protocol", "captures", "real_source", "device", "seconds"}."""
+"validation_epoch", "n_train", "n_test", "predicted_by_lights", "seed"}...], "spread": [{"task", "model",
+"metric", "seeds", "predicted", "mean", "sd", "min", "max", "predicted_last_epoch", "real", "real_in_range"}...]
+(two seeds or more), "seeds", "cells": [per-run settings and per-epoch history...], "protocol", "captures",
+"real_source", "device", "seconds"}."""
 
 
 def _fmt(metric: str, value) -> str:
@@ -69,6 +78,9 @@ def _text(res: dict, sensor: str) -> str:
              "real": _fmt(r["metric"], r["real"]),
              "lights on / off": " / ".join(_fmt(r["metric"], r["predicted_by_lights"].get(k)) for k in ("on", "off")),
              "budget": r["budget"], "device": r["device"], "seconds": round(r["seconds"])} for r in res["rows"]]
+    several = len(res.get("seeds", ())) > 1
+    if several:
+        rows = [{**row, "seed": "-" if r["seed"] is None else r["seed"]} for row, r in zip(rows, res["rows"])]
     foot = ("predicted: the epoch with the best test score (DENALI's choice); last epoch: the recipe's last; "
             "validation-chosen: " + ("a second run on 90 % of the training rows, its epoch chosen on the other "
                                      "10 %" if res["validation"] else "not run (--no-validation)") +
@@ -79,7 +91,16 @@ def _text(res: dict, sensor: str) -> str:
                    r["model"] == "knn" for r in res["rows"]) else "") + "\n"
             f"{res['seconds']:.0f} s on {res['device']} ({res['torch_threads']} torch threads), "
             f"torch {res['torch']}")
-    return "\n".join(head + [format_table(rows), foot])
+    spread = []
+    if several and res["spread"]:
+        spread = ["", "Over the training seeds (DENALI's figure, best on test, once per seed; DENALI ran seed 42 once):",
+                  format_table([{"task": g["task"], "model": g["model"], "seeds": len(g["seeds"]),
+                                 "mean": _fmt(g["metric"], g["mean"]), "sd": _fmt(g["metric"], g["sd"]),
+                                 "lowest - highest": f"{_fmt(g['metric'], g['min'])} - {_fmt(g['metric'], g['max'])}",
+                                 "real": _fmt(g["metric"], g["real"]),
+                                 "real between": "-" if g["real_in_range"] is None else
+                                 ("yes" if g["real_in_range"] else "no")} for g in res["spread"]])]
+    return "\n".join(head + [format_table(rows)] + spread + [foot])
 
 
 def _check(args):
@@ -109,7 +130,8 @@ def _cmd(args) -> int:
         torch.set_num_threads(args.threads)
     budget = args.budget or ("full" if device.startswith("cuda") else "quick")
     if device == "cpu":
-        est = estimate_seconds(args.models, args.tasks, protocol, device, validation=not args.no_validation)
+        est = estimate_seconds(args.models, args.tasks, protocol, device, validation=not args.no_validation,
+                               n_seeds=len(args.seeds))
         took = f"{est / 3600:.1f} h" if est >= 3600 else f"{max(1.0, est / 60):.0f} min"
         line = (f"bench denali: {protocol.describe()} on the CPU: about {took} of training on this machine now "
                 "(timed on a few batches), plus the captures' simulation the first time")
@@ -121,7 +143,7 @@ def _cmd(args) -> int:
     with progress_bar(args, None, "bench denali", "step") as bar:
         res = run_denali_bench(args.sensor, budget=budget, models=args.models, tasks=args.tasks, device=device,
                                validation=not args.no_validation, store=args.store, objects=args.objects,
-                               positions=args.positions, epochs=args.epochs, progress=bar)
+                               positions=args.positions, epochs=args.epochs, seeds=args.seeds, progress=bar)
     emit(args, res, _text(res, res["captures"]["sensor"]))
     return 0
 
@@ -162,6 +184,9 @@ def add_bench(bsub) -> None:
                    help="only these gantry positions (budget becomes custom)")
     p.add_argument("--epochs", type=int_type(1, 10000), default=None, metavar="N",
                    help="epochs for every cell instead of DENALI's (budget becomes custom)")
+    p.add_argument("--seeds", type=seed_list_type(max_count=20), default=[42], metavar="S1,S2,...",
+                   help="seeds of torch's generator; each 1D CNN and MLP cell is trained once per seed and the spread "
+                        "printed (default: 42 alone, DENALI's; the split stays DENALI's)")
     p.add_argument("--threads", type=int_type(1, 256), default=None, metavar="N",
                    help="torch CPU threads (default: torch's; on a busy shared machine 1 trains several times faster "
                         "than 2)")
