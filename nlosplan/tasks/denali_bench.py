@@ -42,8 +42,9 @@ from nlosplan.denali import DENALI_OBJECTS, N_POSITIONS, SIZES
 from nlosplan.errors import UserError
 from nlosplan.tasks.denali_protocol import SEED
 
-__all__ = ["BUDGETS", "BUILD_SEED", "QUICK_EPOCH_FRACTION", "QUICK_POSITION_STEP", "Protocol", "checkpoint_check",
-           "default_store", "estimate_seconds", "load_protocol_captures", "protocol_for", "run_denali_bench"]
+__all__ = ["BUDGETS", "BUILD_SEED", "QUICK_EPOCH_FRACTION", "QUICK_POSITION_STEP", "Protocol", "check_seeds",
+           "checkpoint_check", "default_store", "estimate_seconds", "load_protocol_captures", "protocol_for",
+           "run_denali_bench", "seed_spread"]
 
 BUDGETS = ("full", "quick")
 #: ``quick``: every n-th gantry position, and this fraction of DENALI's epochs (rounded up).
