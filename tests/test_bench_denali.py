@@ -136,6 +136,7 @@ def test_bench_denali_knn_cell_on_denalis_split(capsys, synthetic_captures):
 
 
 def test_bench_denali_seeds_train_each_cell_per_seed_and_say_the_spread(capsys, synthetic_captures):
+    from nlosplan.errors import UserError
     from nlosplan.tasks.denali_bench import check_seeds, seed_spread
 
     argv = ["bench", "denali", "--device", "cpu", "--objects", "1,7,A,S", "--positions", "0-8", "--epochs", "3",
@@ -156,7 +157,8 @@ def test_bench_denali_seeds_train_each_cell_per_seed_and_say_the_spread(capsys, 
     argv[argv.index("5,6,7")] = "6"
     assert main(argv) == 0
     one = json.loads(capsys.readouterr().out)
-    assert one["spread"] == [] and [r["predicted"] for r in one["rows"] if r["model"] == "cnn1d"] == [cnn[1]["predicted"]]
+    assert one["spread"] == []
+    assert [r["predicted"] for r in one["rows"] if r["model"] == "cnn1d"] == [cnn[1]["predicted"]]
     argv[argv.index("6")] = "5,6"
     argv.remove("--json")
     assert main(argv) == 0
@@ -167,10 +169,11 @@ def test_bench_denali_seeds_train_each_cell_per_seed_and_say_the_spread(capsys, 
              "real": 0.9468, "seed": s} for s, p in ((1, 0.93), (2, 0.95))]
     (g,) = seed_spread(rows)
     assert g["real_in_range"] is True and g["sd"] == pytest.approx(0.01 * 2 ** 0.5)
-    assert seed_spread(rows[:1]) == [] and seed_spread(rows[:1] + [{**rows[1], "predicted": 0.94}])[0]["real_in_range"] is False
-    with pytest.raises(Exception, match="distinct"):
+    assert seed_spread(rows[:1]) == []
+    assert seed_spread(rows[:1] + [{**rows[1], "predicted": 0.94}])[0]["real_in_range"] is False
+    with pytest.raises(UserError, match="distinct"):
         check_seeds([1, 1])
-    with pytest.raises(Exception, match="integer"):
+    with pytest.raises(UserError, match="integer"):
         check_seeds([1.5])
 
 

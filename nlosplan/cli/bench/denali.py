@@ -93,7 +93,8 @@ def _text(res: dict, sensor: str) -> str:
             f"torch {res['torch']}")
     spread = []
     if several and res["spread"]:
-        spread = ["", "Over the training seeds (DENALI's figure, best on test, once per seed; DENALI ran seed 42 once):",
+        spread = ["", "Over the training seeds (DENALI's figure, best on test, once per seed; "
+                      "DENALI ran seed 42 once):",
                   format_table([{"task": g["task"], "model": g["model"], "seeds": len(g["seeds"]),
                                  "mean": _fmt(g["metric"], g["mean"]), "sd": _fmt(g["metric"], g["sd"]),
                                  "lowest - highest": f"{_fmt(g['metric'], g['min'])} - {_fmt(g['metric'], g['max'])}",
