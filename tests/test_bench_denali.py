@@ -175,6 +175,8 @@ def test_bench_denali_seeds_train_each_cell_per_seed_and_say_the_spread(capsys, 
         check_seeds([1, 1])
     with pytest.raises(UserError, match="integer"):
         check_seeds([1.5])
+    with pytest.raises(UserError, match="integer from 0 to 4294967295"):
+        check_seeds([2 ** 32])
 
 
 def test_full_budget_on_the_cpu_warns_how_long_before_any_work(capsys, monkeypatch):

@@ -288,11 +288,14 @@ def _row(res, real: float | None, val_res, protocol: Protocol, labels) -> dict:
 
 
 def check_seeds(seeds) -> tuple[int, ...]:
-    """``seeds`` as distinct non-negative ints (torch's generator takes any below 2**63); UserError otherwise."""
+    """``seeds`` as distinct ints from 0 to :data:`~nlosplan.resources.MAX_SEED` (every seed the tool takes);
+    UserError otherwise."""
+    from nlosplan.resources import MAX_SEED
+
     out = []
     for v in seeds:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) < 2 ** 63:
-            raise UserError(f"seed {v!r} is not an integer from 0 to 2**63-1")
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= int(v) <= MAX_SEED:
+            raise UserError(f"seed {v!r} is not an integer from 0 to {MAX_SEED}")
         out.append(int(v))
     if not out or len(set(out)) != len(out):
         raise UserError(f"seeds {', '.join(map(str, out)) or '(none)'}: give one or more distinct seeds")
