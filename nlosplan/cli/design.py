@@ -214,8 +214,8 @@ def add(sub) -> None:
                    "the least hardware per NLOS task on the DENALI rig: search, verify, report (the main job)",
                    description=DESCRIPTION)
     p.add_argument("--quick", action="store_true",
-                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects, 4 worlds): about 7 "
-                        "minutes")
+                   help="reduced space and scenes (zones 1x1/3x3, four axes, 10 objects, 4 worlds): 1 to 2.5 minutes "
+                        "the first time, 0.5 to 1.5 after")
     p.add_argument("--config", metavar="TOML", help="design space, requirements, cost, search and scenes "
                                                      "(see nlosplan/planner/design/config.py for the tables)")
     p.add_argument("--requirement", action="append", type=requirement_type, metavar="REQ",
