@@ -44,7 +44,9 @@ def test_bad_config_table_and_cluster_exit_2(capsys, tmp_path):
     ("[worlds.ranges]\nalbedo = {low = 0.7, high = 0.3}\n", "[worlds.ranges] albedo: low 0.7 > high 0.3"),
     ("[worlds.ranges]\nalbedo = {low = 0.5, high = 1.5}\n", "albedo: 0.5..1.5 leaves the physical range [0, 1]"),
     ("[worlds.ranges]\nspeed = {low = 1, high = 2}\n", "[worlds.ranges] speed: unknown world parameter"),
-    ("[worlds]\nplanets = 3\n", "unknown [worlds] key(s) planets; allowed: candidates, count"),
+    ("[worlds]\nplanets = 3\n", "unknown [worlds] key(s) planets; allowed: budget, candidates, count"),
+    ("[worlds]\nbudget = -2\n", "[worlds] budget=-2 must be a whole number >= 0"),
+    ("[worlds]\nbudget = 2.5\n", "[worlds] budget=2.5 must be a whole number >= 0"),
     ("[search]\nseed = -3\n", "seed=-3 must be a whole number from 0 to 1000000"),
     ("[search]\nmodels = ['mlp', 'gpt']\n", "unknown model(s) 'gpt'"),
 ])

@@ -142,6 +142,9 @@ def test_report_is_written_and_self_contained(finished):
     assert html.count("data:image/png;base64,") == len(paths["plots"]) >= 5
     assert "Answer: the cheapest design per task" in html and "Minimum requirement per parameter" in md
     assert "git revision" in md and "wall time" in md
+    b = result["budget"]  # the worlds' own budget, and what of it went where a seed could change the answer
+    assert b["worlds_extra_evaluations"] == 48 and 0 <= b["worlds_spent"] <= 48
+    assert f"{b['worlds_spent']} of 48 extra world evaluations went to the candidate fewest worlds short" in md
     for p in paths["plots"].values():
         assert (out / p.split("/")[-1]).stat().st_size > 5000
 

@@ -331,3 +331,72 @@ def test_the_decide_stage_spends_seeds_on_undecided_per_parameter_rows():
     assert tv.verdict != "undecided" or tv.seeds == 6
     assert undecided_lines(deciding.evidence, req) == []
     assert deciding.evidence.extra_spent() <= 20
+
+
+def _status(kinds: str, needed: int, reachable: str = "") -> robust.WorldStatus:
+    """A status from one letter per world: m(et), n(ot met), u(ndecided); ``reachable``: 'r' where a seed may help."""
+    verdicts = {"m": MET, "n": NOT_MET, "u": UNDECIDED}
+    per = tuple(robust.WorldValue(0.04, 0.03, 0.05, verdicts[k], 1, 1, 0.0, reachable[i:i + 1] == "r")
+                for i, k in enumerate(kinds))
+    met = kinds.count("m")
+    return robust.WorldStatus(met, kinds.count("n"), kinds.count("u"), len(kinds), needed, met >= needed, per, {},
+                              "")
+
+
+def test_the_worlds_budget_goes_to_the_candidate_fewest_worlds_short_of_holding_then_the_cheapest():
+    from nlosplan.planner.design.evidence import Candidate
+
+    def ex(cost, status):
+        return robust.Examined(Candidate(Design(jitter_fwhm_ps=cost), cost), status)
+
+    at_margin = ex(1.0, _status("muuuuuuu", 8, "-rrrrrrr"))   # 7 worlds short: every one must be decided
+    one_short = ex(2.0, _status("mmmmmmmu", 8, "-------r"))
+    also_one = ex(1.5, _status("mmmmmmum", 8, "------r-"))
+    hopeless = ex(0.5, _status("mmmmmmmu", 8, "--------"))   # its undecided world cannot turn met
+    failed = ex(0.8, _status("mmmmmmmn", 8, "--------"))
+    holds = ex(3.0, _status("mmmmmmmm", 8))
+    assert robust.flips_needed(at_margin.status) == 7 and robust.flips_needed(hopeless.status) is None
+    assert robust.flips_needed(failed.status) is None and robust.flips_needed(holds.status) == 0
+    pick = robust.to_extend(None, LOC, [at_margin, hopeless, failed, one_short, also_one, holds], pairs=20)
+    assert pick is also_one  # one world short, and cheaper than the other one world short
+    assert robust.to_extend(None, LOC, [at_margin, one_short], pairs=20) is one_short
+    assert robust.to_extend(None, LOC, [at_margin], pairs=20) is at_margin  # the only one that can still hold
+    assert robust.to_extend(None, LOC, [at_margin], pairs=6) is None     # 7 worlds short, 6 pairs left
+    # only candidates before the first that holds (a cheaper answer); none while one is still being surveyed
+    assert robust.to_extend(None, LOC, [holds, one_short], pairs=20) is None
+    assert robust.to_extend(None, LOC, [one_short, robust.Examined(one_short.candidate, None)], pairs=20) is None
+
+
+def test_the_worlds_decide_with_their_own_budget_apart_from_the_search_s():
+    """Issue 36: the per-parameter rows spent the whole [search] budget and the cheapest candidates' worlds stayed
+    undecided at one seed, so the answer changed with --seed; the worlds now have a budget of their own."""
+    def run(world_budget):
+        wcfg = WorldsConfig(count=6, quorum=0.9, candidates=3, scene_step=2, budget=world_budget,
+                            ranges=(WorldRange("albedo", 0.4, 0.6),))
+        worlds = draw_worlds(wcfg, SPACE.sensor, "off", seed=0)
+        plan = robust.WorldPlan(wcfg, worlds, SceneSet(objects=("A",)), scene_ratio=2.0)
+        cfg = SearchConfig(grid_points=5, refine_steps=2, seeds=2, candidates=3, models=("mlp",), budget=0,
+                           max_seeds=6)
+        search = DesignSearch(SPACE, [LOC], cfg, REFS, worlds=plan)
+        drive(search, Fake(noise=0.08, worlds=worlds))
+        return search.evidence
+
+    none, some = run(0), run(40)
+    assert none.extra_spent() == some.extra_spent() == 0  # [search] budget 0: no extra nominal seed either way
+    assert none.extra_spent(worlds=True) == 0 and 0 < some.extra_spent(worlds=True) <= 40
+    runs = lambda ev: [v.runs for e in robust.examined(ev, LOC) for v in e.status.per_world]  # noqa: E731
+    assert max(runs(none)) == 1 and max(runs(some)) > 1
+    # extra seeds only ever went to worlds that were undecided and could still turn met when they were asked for
+    for e in robust.examined(some, LOC):
+        for v in e.status.per_world:
+            assert v.runs == 1 or v.verdict != NOT_MET
+    # at one seed per world the cheapest candidate stays undecided everywhere and a costlier one is the answer;
+    # with the worlds' budget the cheapest is decided met in every world and is the answer
+    first = robust.examined(none, LOC)[0]
+    assert not first.status.holds and first.status.undecided == 6
+    cheap, costly = summarize(some)["cheapest"][0], summarize(none)["cheapest"][0]
+    assert cheap["verdict"] == costly["verdict"] == MET
+    assert cheap["key"] == first.design.key() and cheap["cost"] < costly["cost"] and cheap["worlds"]["met"] == 6
+    res = summarize(some)
+    assert res["budget"]["worlds_extra_evaluations"] == 40
+    assert res["budget"]["worlds_spent"] == some.extra_spent(worlds=True)

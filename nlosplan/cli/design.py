@@ -56,9 +56,10 @@ interval of a design is that of its mean over its runs, so two runs with differe
 seeds until decided or the budget is spent. The cheapest met candidates are then
 checked in --worlds plausible worlds (object albedo, background, photon scale, extra
 jitter, and a calibration's parameter uncertainty when the sensor has one): the
-minimum hardware is the cheapest design met in at least 90 % of them. With --real,
-the trained evaluator uses real captures from a store instead (designs finer than the
-captures are reported unreachable; no worlds).
+minimum hardware is the cheapest design met in at least 90 % of them (undecided worlds
+get more seeds from the worlds' own budget, [worlds] budget, where a seed can change
+the answer). With --real, the trained evaluator uses real captures from a store instead
+(designs finer than the captures are reported unreachable; no worlds).
 
 First the answer at DENALI's own design point (3x3, 128 bins of 92.8 ps, no added
 jitter, all photons): each task's predicted metric with its interval, learner and

@@ -44,6 +44,16 @@ _PARAM_FMT = {  # user units (summary.PARAMETERS): zones are already "RxC"
 _VERDICT_TEXT = {"met": "yes", "not met": "NO", "undecided": "undecided"}
 
 
+
+def _worlds_budget_text(result: dict) -> str:
+    """The worlds' own budget, spent where one more seed could change the answer (empty for an old result)."""
+    b = result.get("budget", {})
+    if b.get("worlds_extra_evaluations") is None:
+        return ""
+    return (f" Every candidate gets one seed per world; {b['worlds_spent']} of {b['worlds_extra_evaluations']} extra "
+            "world evaluations went to the candidate fewest worlds short of holding, in the worlds that more seeds "
+            "could still turn met.")
+
 def _fmt_metric(task: str, v) -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "n/a"
@@ -293,7 +303,8 @@ def write_design_report(result: dict, out) -> dict:
              f"{wsum['needed']} of them ({100 * wsum['quorum']:.0f} %). Worlds simulate {wsum['scenes_per_world']} "
              f"scenes each (1 in {wsum['scene_step']} of the run's gantry positions): a world's metric is the verified value shifted by "
              f"the paired world effect, whose run-to-run variance is {wsum['variance_factor']:.1f}x a run's on the "
-             "full scenes (the cost of fewer scenes in interval width).", worlds_table(result)),
+             "full scenes (the cost of fewer scenes in interval width)." + _worlds_budget_text(result),
+             worlds_table(result)),
             ("The worlds drawn", "Each world's parameters (sensor fields and DENALI scene arguments).",
              world_parameters_table(result)),
         ]

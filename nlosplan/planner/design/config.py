@@ -37,6 +37,7 @@ keeps the default of the chosen mode)::
     quorum = 0.9                 # a minimum design must be met in this fraction of them
     scene_step = 2               # worlds simulate every 2nd position of the run's scenes
     candidates = 4               # most candidates examined per requirement until one holds
+    budget = 48                  # extra world evaluations to decide undecided worlds (apart from [search]'s)
     seed = 0                     # the worlds' draw (the same for every --seed)
     [worlds.ranges]              # what no data pins down (replaces the defaults when given)
     albedo = {low = 0.3, high = 0.7}
@@ -85,7 +86,7 @@ def quick_config() -> DesignConfig:
                           max_seeds=4, budget=16, curve_seeds=1)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
-    worlds = WorldsConfig(count=4, scene_step=2, candidates=3)
+    worlds = WorldsConfig(count=4, scene_step=2, candidates=3, budget=24)
     return DesignConfig(space=space, search=search, scenes=scenes, label="quick", worlds=worlds)
 
 

@@ -317,16 +317,22 @@ class Evidence:
         return score_to_metric(req, metric_to_score(req, bound_value) + self.gap(req).value)
 
     # ------------------------------------------------------- budget, decide
-    def extra_spent(self) -> int:
-        """Extra evaluations spent deciding (seeds beyond ``seeds`` in the nominal model, beyond 1 in worlds)."""
+    def extra_spent(self, worlds: bool = False) -> int:
+        """Extra evaluations spent deciding: seeds beyond ``seeds`` in the nominal model (``[search] budget``), or
+        with ``worlds`` beyond each world's first seed, controls included (``[worlds] budget``)."""
         n, base = 0, self.config.seed_of(0)
         for r in self._store:
-            if r.evaluator is Evaluator.TRAINED:
-                n += r.seed - base >= (1 if r.world is not None else self.config.seeds)
+            if r.evaluator is Evaluator.TRAINED and (r.world is not None) == worlds:
+                n += r.seed - base >= (1 if worlds else self.config.seeds)
         return n
 
     def budget_left(self) -> int:
+        """Extra nominal evaluations left to the decide stage (``[search] budget``)."""
         return max(0, self.config.budget - self.extra_spent())
+
+    def worlds_budget_left(self) -> int:
+        """Extra world evaluations left to the worlds stage (``[worlds] budget``; 0 without worlds)."""
+        return 0 if self.worlds is None else max(0, self.worlds.config.budget - self.extra_spent(worlds=True))
 
     def candidates(self, req: Requirement) -> list[Candidate]:
         """The requirement's candidates from the optimize stage, cheapest first, each with its ``trained`` estimate."""

@@ -5,10 +5,14 @@ cheapest first (at most ``[worlds] candidates``): each is evaluated in every
 world (:mod:`~nlosplan.planner.design.worlds`) and in world 0 (the nominal
 model at the worlds' scenes) at the same seeds, and its metric in world
 ``w`` is its verified value shifted by the paired difference (see the worlds
-module). A world's verdict is the three-valued one of that interval; an
-undecided world gets one more seed pair while the run's budget lasts. The
-first candidate met in at least ``quorum`` of the worlds is the
-requirement's minimum hardware. Once a candidate fails, the next one is not
+module). A world's verdict is the three-valued one of that interval. Every
+candidate examined first gets one seed pair per world; more seeds go, from
+the worlds' own budget (``[worlds] budget``, apart from the search's so that
+the per-parameter rows cannot spend it), to the examined candidate fewest
+worlds short of holding (then the cheapest) among those before the first
+that holds, and only to its undecided worlds that more seeds could still
+turn *met* (:func:`to_extend`). The first candidate met in at least
+``quorum`` of the worlds is the requirement's minimum hardware. Once a candidate fails, the next one is not
 simply the next cheapest (at the requirement's margin those fail alike, and
 which of them a seed happens to examine decided the answer): it is the
 cheapest design verified *met* anywhere in the search (optimized, or on the
@@ -36,7 +40,7 @@ from nlosplan.planner.design.worlds import World, WorldsConfig
 
 __all__ = ["WorldPlan", "WorldRun", "WorldValue", "WorldStatus", "Examined", "world_target", "world_runs",
            "needed_references", "world_value", "world_status", "attribution", "worst_loss", "next_candidate",
-           "examined", "worlds_table"]
+           "examined", "worlds_table", "flips_needed", "to_extend"]
 
 
 @dataclass
@@ -84,7 +88,10 @@ class WorldRun:
 class WorldValue:
     """A design's metric in one world: the verified value shifted by the paired world effect.
 
-    ``seeds`` pairs finished (of ``runs`` evaluated); ``effect`` is the mean paired difference, score scale.
+    ``seeds`` pairs finished (of ``runs`` evaluated); ``effect`` is the mean paired difference, score scale;
+    ``reachable``: undecided, and more seeds of this world could still make it *met* (its centre meets the
+    requirement by more than the interval's half-width would be at ``max_seeds`` pairs; the nominal design's own
+    uncertainty does not shrink with the world's seeds).
     """
 
     value: float
@@ -94,6 +101,7 @@ class WorldValue:
     seeds: int
     runs: int
     effect: float
+    reachable: bool = False
 
 
 @dataclass(frozen=True)
@@ -173,19 +181,20 @@ def world_value(evidence: Evidence, req: Requirement, d: Design, w: World) -> Wo
     centre = metric_to_score(req, nominal.value) + sum(diffs) / m
     half = q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / m)
     lo, hi = score_to_metric(req, centre - half), score_to_metric(req, centre + half)
-    return WorldValue(score_to_metric(req, centre), lo, hi, verdict(req, lo, hi), m, present, sum(diffs) / m)
-
-
-def _can_extend(evidence: Evidence, wv: WorldValue | None) -> bool:
-    return (wv is not None and wv.verdict == UNDECIDED and wv.runs < evidence.config.max_seeds
-            and evidence.budget_left() >= 2)
+    v = verdict(req, lo, hi)
+    most = max(evidence.config.max_seeds, m)
+    best_half = q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / most)
+    reachable = (v == UNDECIDED and present < evidence.config.max_seeds
+                 and _goodness(req, score_to_metric(req, centre)) - _goodness(req, req.threshold) > best_half)
+    return WorldValue(score_to_metric(req, centre), lo, hi, v, m, present, sum(diffs) / m, reachable)
 
 
 def world_status(evidence: Evidence, req: Requirement, d: Design) -> WorldStatus | None:
-    """In how many worlds ``d`` is met, and whether it holds (None while its evaluations are not all in)."""
+    """In how many worlds ``d`` is met, and whether it holds, from the runs so far (None until every world has its
+    first pair; more seeds of its undecided worlds come later, see :func:`world_runs`)."""
     wp = evidence.worlds
     per = [world_value(evidence, req, d, w) for w in wp.drawn]
-    if any(v is None or _can_extend(evidence, v) for v in per):
+    if any(v is None for v in per):
         return None
     met = sum(v.verdict == MET for v in per)
     sensitivity, breaks, driver = attribution(req, wp.drawn, per)
@@ -304,25 +313,56 @@ def needed_references(evidence: Evidence) -> list[tuple[World, str]]:
     return list({(w.index, lay): (w, lay) for w, lay in out}.values())
 
 
+def flips_needed(st: WorldStatus) -> int | None:
+    """Undecided worlds that must turn *met* for the design to hold; None when it cannot (too few reachable)."""
+    need = max(0, st.needed - st.met)
+    reachable = sum(v.reachable for v in st.per_world)
+    return need if need <= reachable else None
+
+
+def to_extend(evidence: Evidence, req: Requirement, ex: list[Examined], pairs: int) -> Examined | None:
+    """The examined candidate whose undecided worlds get the next seeds, or None.
+
+    Only candidates examined before the first that holds (a cheaper answer, if they hold), that could still hold
+    (:func:`flips_needed`) with at most ``pairs`` more seed pairs: the one fewest worlds short of holding, then the
+    cheapest. So the worlds' budget goes where a seed can change the answer, not to a candidate at the
+    requirement's margin that would need every world decided.
+    """
+    options = []
+    for e in ex:
+        if e.status is None:
+            return None
+        if e.status.holds:
+            break
+        n = flips_needed(e.status)
+        if n is not None and 0 < n <= pairs:
+            options.append((n, e.candidate.cost, e.design, e))
+    return min(options, key=lambda o: o[:3])[3] if options else None
+
+
 def world_runs(evidence: Evidence) -> list[WorldRun]:
-    """The next evaluations of the candidates being examined: a first seed pair per world (the world's run and the
-    control's), more where undecided while the budget lasts."""
+    """The next evaluations of the worlds stage: a first seed pair per world (the world's run and the control's)
+    for the candidate being examined; once every examined candidate has its first pairs, one more pair for each
+    reachable undecided world of :func:`to_extend`'s candidate while ``[worlds] budget`` lasts."""
     wp, runs = evidence.worlds, []
-    left = evidence.budget_left()
+    left = evidence.worlds_budget_left()
     for req in evidence.requirements:
         ex = examined(evidence, req)
-        if not ex or ex[-1].status is not None:
+        if not ex:
             continue
-        d = ex[-1].design
-        for w in wp.drawn:
-            wv = world_value(evidence, req, d, w)
-            if wv is None:
-                i = 0
-            elif _can_extend(evidence, wv) and left >= 2:
-                i, left = wv.runs, left - 2
-            else:
-                continue
-            runs += [WorldRun(req, d, w, i), WorldRun(req, d, wp.worlds[0], i)]
+        if ex[-1].status is None:
+            d = ex[-1].design
+            for w in wp.drawn:
+                if world_value(evidence, req, d, w) is None:
+                    runs += [WorldRun(req, d, w, 0), WorldRun(req, d, wp.worlds[0], 0)]
+            continue
+        pick = to_extend(evidence, req, ex, left // 2)
+        if pick is None:
+            continue
+        for w, wv in zip(wp.drawn, pick.status.per_world):
+            if wv.reachable and left >= 2:
+                runs += [WorldRun(req, pick.design, w, wv.runs), WorldRun(req, pick.design, wp.worlds[0], wv.runs)]
+                left -= 2
     return runs
 
 

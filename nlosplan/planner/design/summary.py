@@ -348,7 +348,9 @@ def summarize(evidence: Evidence) -> dict:
                          for r in evidence.optimize_log],
             "learners": _learner_table(evidence), "worlds": _worlds_summary(evidence), "spread": spreads,
             "budget": {"extra_evaluations": evidence.config.budget, "spent": evidence.extra_spent(),
-                       "max_seeds": evidence.config.max_seeds},
+                       "max_seeds": evidence.config.max_seeds,
+                       "worlds_extra_evaluations": None if evidence.worlds is None else evidence.worlds.config.budget,
+                       "worlds_spent": None if evidence.worlds is None else evidence.extra_spent(worlds=True)},
             "metric_definitions": metric_definitions(),
             "reference_design": user_design(evidence.base, space), "reference_sensor": space.sensor.name,
             "requirements_asked": [r.name for r in evidence.requirements], "evaluations": len(evidence)}

@@ -198,6 +198,11 @@ class WorldsConfig:
     candidates : int
         Most candidates per requirement checked in the worlds, until one holds (the cheapest met one, then
         designs robust to the losses seen: :func:`~nlosplan.planner.design.robust.next_candidate`).
+    budget : int
+        Extra evaluations the worlds may spend deciding undecided worlds (each extra seed of a world is a pair: the
+        world's run and the control's), apart from the search's ``[search] budget`` so that the per-parameter
+        rows never starve the answer's check. A world evaluation trains the learner on the worlds' scenes
+        (about 0.25 s for the nearest-neighbour learner on 2 cores).
     seed : int
         Seed of the worlds' draw. The worlds sample the model's uncertainty, not a run's noise: they stay the
         same for every ``--seed`` (which redraws noise, splits and training), so two seeds judge their
@@ -209,6 +214,7 @@ class WorldsConfig:
     ranges: tuple[WorldRange, ...] | None = None
     scene_step: int = 2
     candidates: int = 4
+    budget: int = 48
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -216,7 +222,7 @@ class WorldsConfig:
 
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= MAX_SEED:
             raise UserError(f"[worlds] seed={self.seed!r} must be a whole number from 0 to {MAX_SEED}")
-        for name, lo in (("count", 1), ("scene_step", 1), ("candidates", 1)):
+        for name, lo in (("count", 1), ("scene_step", 1), ("candidates", 1), ("budget", 0)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise UserError(f"[worlds] {name}={v!r} must be a whole number >= {lo}")
@@ -239,15 +245,16 @@ class WorldsConfig:
 
     def to_dict(self) -> dict:
         return {"count": self.count, "quorum": self.quorum, "scene_step": self.scene_step,
-                "candidates": self.candidates, "seed": self.seed,
+                "candidates": self.candidates, "budget": self.budget, "seed": self.seed,
                 "ranges": None if self.ranges is None else [r.to_dict() for r in self.ranges]}
 
     @classmethod
     def from_dict(cls, data: dict, base: "WorldsConfig | None" = None) -> "WorldsConfig":
         """From a TOML ``[worlds]`` table (``[worlds.ranges]``: ``name = {low, high, relative, log}``)."""
         base = base or cls()
-        check_keys(data, ("candidates", "count", "quorum", "ranges", "scene_step", "seed"), "[worlds] key(s)")
-        kw = {k: data[k] for k in ("count", "quorum", "scene_step", "candidates", "seed") if k in data}
+        check_keys(data, ("budget", "candidates", "count", "quorum", "ranges", "scene_step", "seed"),
+                   "[worlds] key(s)")
+        kw = {k: data[k] for k in ("count", "quorum", "scene_step", "candidates", "budget", "seed") if k in data}
         if "ranges" in data:
             table = data["ranges"]
             if not isinstance(table, dict) or not table:
