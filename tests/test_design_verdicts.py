@@ -357,14 +357,14 @@ def test_the_worlds_budget_goes_to_the_candidate_fewest_worlds_short_of_holding_
     holds = ex(3.0, _status("mmmmmmmm", 8))
     assert robust.flips_needed(at_margin.status) == 7 and robust.flips_needed(hopeless.status) is None
     assert robust.flips_needed(failed.status) is None and robust.flips_needed(holds.status) == 0
-    pick = robust.to_extend(None, LOC, [at_margin, hopeless, failed, one_short, also_one, holds], pairs=20)
+    pick = robust.to_extend([at_margin, hopeless, failed, one_short, also_one, holds], pairs=20)
     assert pick is also_one  # one world short, and cheaper than the other one world short
-    assert robust.to_extend(None, LOC, [at_margin, one_short], pairs=20) is one_short
-    assert robust.to_extend(None, LOC, [at_margin], pairs=20) is at_margin  # the only one that can still hold
-    assert robust.to_extend(None, LOC, [at_margin], pairs=6) is None     # 7 worlds short, 6 pairs left
+    assert robust.to_extend([at_margin, one_short], pairs=20) is one_short
+    assert robust.to_extend([at_margin], pairs=20) is at_margin  # the only one that can still hold
+    assert robust.to_extend([at_margin], pairs=6) is None     # 7 worlds short, 6 pairs left
     # only candidates before the first that holds (a cheaper answer); none while one is still being surveyed
-    assert robust.to_extend(None, LOC, [holds, one_short], pairs=20) is None
-    assert robust.to_extend(None, LOC, [one_short, robust.Examined(one_short.candidate, None)], pairs=20) is None
+    assert robust.to_extend([holds, one_short], pairs=20) is None
+    assert robust.to_extend([one_short, robust.Examined(one_short.candidate, None)], pairs=20) is None
 
 
 def test_the_worlds_decide_with_their_own_budget_apart_from_the_search_s():

@@ -44,7 +44,6 @@ _PARAM_FMT = {  # user units (summary.PARAMETERS): zones are already "RxC"
 _VERDICT_TEXT = {"met": "yes", "not met": "NO", "undecided": "undecided"}
 
 
-
 def _worlds_budget_text(result: dict) -> str:
     """The worlds' own budget, spent where one more seed could change the answer (empty for an old result)."""
     b = result.get("budget", {})
@@ -53,6 +52,7 @@ def _worlds_budget_text(result: dict) -> str:
     return (f" Every candidate gets one seed per world; {b['worlds_spent']} of {b['worlds_extra_evaluations']} extra "
             "world evaluations went to the candidate fewest worlds short of holding, in the worlds that more seeds "
             "could still turn met.")
+
 
 def _fmt_metric(task: str, v) -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):

@@ -12,8 +12,8 @@ the per-parameter rows cannot spend it), to the examined candidate fewest
 worlds short of holding (then the cheapest) among those before the first
 that holds, and only to its undecided worlds that more seeds could still
 turn *met* (:func:`to_extend`). The first candidate met in at least
-``quorum`` of the worlds is the requirement's minimum hardware. Once a candidate fails, the next one is not
-simply the next cheapest (at the requirement's margin those fail alike, and
+``quorum`` of the worlds is the requirement's minimum hardware. Once a
+candidate fails, the next one is not simply the next cheapest (at the requirement's margin those fail alike, and
 which of them a seed happens to examine decided the answer): it is the
 cheapest design verified *met* anywhere in the search (optimized, or on the
 scans) whose pessimistic margin exceeds the largest loss any world caused
@@ -320,8 +320,8 @@ def flips_needed(st: WorldStatus) -> int | None:
     return need if need <= reachable else None
 
 
-def to_extend(evidence: Evidence, req: Requirement, ex: list[Examined], pairs: int) -> Examined | None:
-    """The examined candidate whose undecided worlds get the next seeds, or None.
+def to_extend(ex: list[Examined], pairs: int) -> Examined | None:
+    """The candidate of ``ex`` (:func:`examined`) whose undecided worlds get the next seeds, or None.
 
     Only candidates examined before the first that holds (a cheaper answer, if they hold), that could still hold
     (:func:`flips_needed`) with at most ``pairs`` more seed pairs: the one fewest worlds short of holding, then the
@@ -356,7 +356,7 @@ def world_runs(evidence: Evidence) -> list[WorldRun]:
                 if world_value(evidence, req, d, w) is None:
                     runs += [WorldRun(req, d, w, 0), WorldRun(req, d, wp.worlds[0], 0)]
             continue
-        pick = to_extend(evidence, req, ex, left // 2)
+        pick = to_extend(ex, left // 2)
         if pick is None:
             continue
         for w, wv in zip(wp.drawn, pick.status.per_world):
