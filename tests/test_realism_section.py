@@ -31,7 +31,7 @@ def test_section_table_counts_and_names_the_reference_sensor():
     _, text, _ = realism_section("denali-tmf8828-3x3")
     assert "is one of them" in text
     # the real Table 1 and the real-trained networks, beside Table 2: the gap is in the report, not only the docs
-    assert "within the band in 4 of 6 cells" in text and "0 of 4 of DENALI's networks" in text
+    assert "full budget) is within the band in 4 of 6 cells" in text and "0 of 4 of DENALI's networks" in text
     assert "(loc: DENALI's learner is further from its real figure here than its band)" in text
 
 

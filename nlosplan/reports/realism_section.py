@@ -124,9 +124,9 @@ def _gap_text(shipped: dict) -> str:
     n1 = [r for r in t1["rows"] if table1_verdict(r, t1["targets"])]
     nc = [r for r in ck["rows"] if checkpoint_verdict(r, ck["targets"])]
     missed = sorted({r["task"] for r in t1["rows"] if r["model"] == "cnn1d" and not table1_verdict(r, t1["targets"])})
-    text = (f" Against the real Table 1 (issue 35): DENALI's own recipe trained and tested here is within the band "
-            f"in {len(n1)} of {len(t1['rows'])} cells, and {len(nc)} of {len(ck['rows'])} of DENALI's networks "
-            "trained on real captures are off chance here.")
+    text = (f" Against the real Table 1 (issue 35): DENALI's own recipe trained and tested here ('nlosplan bench "
+            f"denali', full budget) is within the band in {len(n1)} of {len(t1['rows'])} cells, and {len(nc)} of "
+            f"{len(ck['rows'])} of DENALI's networks trained on real captures are off chance here ('bench real').")
     if missed or len(nc) < len(ck["rows"]):
         text += (" So this world does not carry the tasks as the real captures do"
                  + (f" ({', '.join(missed)}: DENALI's learner is further from its real figure here than its band)"
