@@ -369,8 +369,7 @@ def test_the_worlds_budget_goes_to_the_candidate_fewest_worlds_short_of_holding_
 
 def test_the_worlds_decide_with_their_own_budget_apart_from_the_search_s():
     """Issue 36: the per-parameter rows spent the whole [search] budget and the cheapest candidates' worlds stayed
-    undecided at one seed, so the answer changed with --seed; the worlds now have a budget of their own, and their
-    candidates their verification seeds."""
+    undecided at one seed, so the answer changed with --seed; the worlds now have a budget of their own."""
     def run(world_budget):
         wcfg = WorldsConfig(count=6, quorum=0.9, candidates=3, scene_step=2, budget=world_budget,
                             ranges=(WorldRange("albedo", 0.4, 0.6),))
@@ -391,19 +390,13 @@ def test_the_worlds_decide_with_their_own_budget_apart_from_the_search_s():
     for e in robust.examined(some, LOC):
         for v in e.status.per_world:
             assert v.runs == 1 or v.verdict != NOT_MET
-    # at one seed per world the cheapest candidate is a world short of holding and so is every other one examined:
-    # the answer is undecided; with the worlds' budget the cheapest is decided met in every world and is the answer
+    # at one seed per world the cheapest candidate stays undecided everywhere and a costlier one is the answer;
+    # with the worlds' budget the cheapest is decided met in every world and is the answer
     first = robust.examined(none, LOC)[0]
-    assert not first.status.holds and first.status.undecided >= 1 and first.status.not_met == 0
-    assert not any(e.status.holds for e in robust.examined(none, LOC))
-    assert summarize(none)["cheapest"][0]["verdict"] == UNDECIDED
-    cheap = summarize(some)["cheapest"][0]
-    assert cheap["verdict"] == MET and cheap["key"] == first.design.key() and cheap["worlds"]["met"] == 6
-    # every candidate examined in the worlds was verified over [search] seeds first (its nominal interval is part
-    # of every world's), without spending the search's budget
-    for ev in (none, some):
-        for e in robust.examined(ev, LOC):
-            assert len(ev.runs(LOC, e.design)) >= 2
+    assert not first.status.holds and first.status.undecided == 6
+    cheap, costly = summarize(some)["cheapest"][0], summarize(none)["cheapest"][0]
+    assert cheap["verdict"] == costly["verdict"] == MET
+    assert cheap["key"] == first.design.key() and cheap["cost"] < costly["cost"] and cheap["worlds"]["met"] == 6
     res = summarize(some)
     assert res["budget"]["worlds_extra_evaluations"] == 40
     assert res["budget"]["worlds_spent"] == some.extra_spent(worlds=True)

@@ -11,9 +11,7 @@ the worlds' own budget (``[worlds] budget``, apart from the search's so that
 the per-parameter rows cannot spend it), to the examined candidate fewest
 worlds short of holding (then the cheapest) among those before the first
 that holds, and only to its undecided worlds that more seeds could still
-turn *met* (:func:`to_extend`); a candidate examined with fewer nominal
-seeds than ``[search] seeds`` gets them (:func:`verification_runs`). The
-first candidate met in at least
+turn *met* (:func:`to_extend`). The first candidate met in at least
 ``quorum`` of the worlds is the requirement's minimum hardware. Once a
 candidate fails, the next one is not simply the next cheapest (at the requirement's margin those fail alike, and
 which of them a seed happens to examine decided the answer): it is the
@@ -42,7 +40,7 @@ from nlosplan.planner.design.worlds import World, WorldsConfig
 
 __all__ = ["WorldPlan", "WorldRun", "WorldValue", "WorldStatus", "Examined", "world_target", "world_runs",
            "needed_references", "world_value", "world_status", "attribution", "worst_loss", "next_candidate",
-           "examined", "worlds_table", "flips_needed", "to_extend", "verification_runs"]
+           "examined", "worlds_table", "flips_needed", "to_extend"]
 
 
 @dataclass
@@ -78,12 +76,11 @@ class WorldPlan:
 
 @dataclass(frozen=True)
 class WorldRun:
-    """One evaluation the worlds stage asks for: ``design``'s ``index``-th run for ``requirement`` in ``world``
-    (None: in the nominal model, a verification seed of :func:`verification_runs`)."""
+    """One evaluation the worlds stage asks for: ``design``'s ``index``-th run for ``requirement`` in ``world``."""
 
     requirement: Requirement
     design: Design
-    world: World | None
+    world: World
     index: int
 
 
@@ -343,24 +340,11 @@ def to_extend(ex: list[Examined], pairs: int) -> Examined | None:
     return min(options, key=lambda o: o[:3])[3] if options else None
 
 
-def verification_runs(evidence: Evidence) -> list[WorldRun]:
-    """The nominal runs an examined candidate lacks (``world`` None): each is verified over ``[search] seeds`` as the
-    optimizer's candidates are (a scanned design examined after a cheaper candidate failed may have one), since its
-    nominal interval is part of every world's."""
-    return [WorldRun(req, e.design, None, i) for req in evidence.requirements for e in examined(evidence, req)
-            for i in _unverified(evidence, req, e.design)]
-
-
-def _unverified(evidence: Evidence, req: Requirement, d: Design) -> list[int]:
-    return [i for i in range(evidence.config.seeds) if evidence.run(Evaluator.TRAINED, req, d, i) is None]
-
-
 def world_runs(evidence: Evidence) -> list[WorldRun]:
-    """The next evaluations of the worlds stage: the examined candidates' missing nominal seeds
-    (:func:`verification_runs`); a first seed pair per world (the world's run and the control's) for the candidate
-    being examined; once every examined candidate has its first pairs and its seeds, one more pair for each
+    """The next evaluations of the worlds stage: a first seed pair per world (the world's run and the control's)
+    for the candidate being examined; once every examined candidate has its first pairs, one more pair for each
     reachable undecided world of :func:`to_extend`'s candidate while ``[worlds] budget`` lasts."""
-    wp, runs = evidence.worlds, verification_runs(evidence)
+    wp, runs = evidence.worlds, []
     left = evidence.worlds_budget_left()
     for req in evidence.requirements:
         ex = examined(evidence, req)
@@ -372,8 +356,6 @@ def world_runs(evidence: Evidence) -> list[WorldRun]:
                 if world_value(evidence, req, d, w) is None:
                     runs += [WorldRun(req, d, w, 0), WorldRun(req, d, wp.worlds[0], 0)]
             continue
-        if any(_unverified(evidence, req, e.design) for e in ex):
-            continue  # its nominal seeds first: every world's interval rests on them
         pick = to_extend(ex, left // 2)
         if pick is None:
             continue

@@ -292,7 +292,7 @@ class DesignSearch:
     def _worlds(self) -> list[DesignJob]:
         jobs = []
         for run in [] if self._ev.worlds is None else robust.world_runs(self._ev):
-            where = (None, None) if run.world is None else robust.world_target(self._ev, run.world, run.design.layout)
+            where = robust.world_target(self._ev, run.world, run.design.layout)
             if where is not None:
                 jobs.append(self.job(Evaluator.TRAINED, run.requirement, run.design, run.index, reference=where[0],
                                      world=where[1]))
