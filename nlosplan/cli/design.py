@@ -225,7 +225,8 @@ def add(sub) -> None:
     p.add_argument("--backend", choices=tuple(BACKENDS), default="fast",
                    help="simulator of the reference histograms: the fast JAX backend (default) or the Mitsuba 3 twin "
                         "(about 0.1 s per scene: the full run's 15,000 scenes take ~30 min; bounds' Jacobians stay fast)")
-    p.add_argument("--seeds", type=int_type(1, 20), default=None, help="seeds of the verification (default 3; quick 2)")
+    p.add_argument("--seeds", type=int_type(1, 20), default=None,
+                   help="seeds of the verification (default 3, also with --quick)")
     p.add_argument("--seed", type=int_type(0, MAX_DESIGN_SEED), default=None,
                    help=f"the run's seed, 0 to {MAX_DESIGN_SEED} (default 0): Poisson noise, train/test splits, training "
                         "seeds and the worlds are drawn from it")

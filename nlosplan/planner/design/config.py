@@ -82,7 +82,7 @@ def quick_config() -> DesignConfig:
     fid["trained"]["epochs"] = 20
     space = DesignSpace(zones=((1, 1), (3, 3)), bin_factors=(1, 2, 4),
                         axes=("zones", "bin_factor", "jitter_fwhm_ps", "photon_fraction"))
-    search = SearchConfig(grid_points=4, refine_steps=1, seeds=2, candidates=1, optimize_evals=8, fidelity=fid,
+    search = SearchConfig(grid_points=4, refine_steps=1, seeds=3, candidates=1, optimize_evals=8, fidelity=fid,
                           max_seeds=4, budget=16, curve_seeds=1)
     scenes = SceneSet(objects=QUICK_OBJECTS, positions=tuple(range(0, 100, 2)), crlb_objects=("A", "S"),
                       crlb_stride=10)
