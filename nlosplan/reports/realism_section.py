@@ -60,14 +60,16 @@ def _value(metric: str, v: float) -> str:
     return f"{100 * v:.2f} cm" if metric == "loc_rmse" else f"{100 * v:.1f} %"
 
 
+def _band(task: str, targets: dict) -> float:
+    """Issue 35's band around Table 1: size in absolute points, localization and shape relative."""
+    return targets["size_points" if task == "size" else "loc_rel" if task == "loc" else "class_rel"]
+
+
 def table1_verdict(row: dict, targets: dict) -> bool:
     """Whether DENALI's recipe on the simulated world (the mean over its seeds) lies within issue 35's band of
     Table 1: localization +-``loc_rel``, shape +-``class_rel`` (relative), size +-``size_points`` (absolute)."""
-    mean = float(np.mean(row["predicted"]))
-    if row["task"] == "size":
-        return abs(mean - row["real"]) <= targets["size_points"]
-    rel = targets["loc_rel"] if row["task"] == "loc" else targets["class_rel"]
-    return abs(mean / row["real"] - 1) <= rel
+    mean, band = float(np.mean(row["predicted"])), _band(row["task"], targets)
+    return abs(mean - row["real"]) <= band if row["task"] == "size" else abs(mean / row["real"] - 1) <= band
 
 
 def table1_rows(t1: dict | None) -> list[dict]:
@@ -78,8 +80,7 @@ def table1_rows(t1: dict | None) -> list[dict]:
     for r in t1["rows"]:
         v = np.asarray(r["predicted"], float)
         spread = f" (sd {_value(r['metric'], float(v.std(ddof=1)))}, {len(v)} seeds)" if len(v) > 1 else " (1 seed)"
-        band = (f"+-{100 * tg['size_points']:g} points" if r["task"] == "size" else
-                f"+-{100 * (tg['loc_rel'] if r['task'] == 'loc' else tg['class_rel']):g} %")
+        band = f"+-{100 * _band(r['task'], tg):g} " + ("points" if r["task"] == "size" else "%")
         out.append({"check": f"DENALI Table 1, its recipe here ({r['model']})", "preset": t1["sensor"],
                     "figure": r["task"], "model": _value(r["metric"], float(v.mean())) + spread,
                     "real or target": f"{_value(r['metric'], r['real'])} {band}",

@@ -179,11 +179,13 @@ def world_value(evidence: Evidence, req: Requirement, d: Design, w: World) -> Wo
     else:
         var_run, q = var_within, Z95
     centre = metric_to_score(req, nominal.value) + sum(diffs) / m
-    half = q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / m)
+    def half_width(pairs: int) -> float:  # the nominal design's own part does not shrink with the world's pairs
+        return q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / pairs)
+
+    half = half_width(m)
     lo, hi = score_to_metric(req, centre - half), score_to_metric(req, centre + half)
     v = verdict(req, lo, hi)
-    most = max(evidence.config.max_seeds, m)
-    best_half = q * math.sqrt(nominal.sd_run ** 2 / nominal.seeds + 2.0 * var_run / most)
+    best_half = half_width(max(evidence.config.max_seeds, m))
     reachable = (v == UNDECIDED and present < evidence.config.max_seeds
                  and _goodness(req, score_to_metric(req, centre)) - _goodness(req, req.threshold) > best_half)
     return WorldValue(score_to_metric(req, centre), lo, hi, v, m, present, sum(diffs) / m, reachable)
